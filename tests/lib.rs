@@ -1,0 +1,46 @@
+//! Helpers shared by anymo's end-to-end tests: finding the real data in `../shared/data`.
+//!
+//! Tests that need the data call [`data_dir`] and return early, printing why, when it is
+//! absent; set `ANYMO_DATA` to point elsewhere.
+
+use std::path::{Path, PathBuf};
+
+/// The data folder (`$ANYMO_DATA`, else `../shared/data` beside the workspace), if present.
+pub fn data_dir() -> Option<PathBuf> {
+    let dir = match std::env::var_os("ANYMO_DATA") {
+        Some(dir) => PathBuf::from(dir),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
+    };
+    if dir.join("manifest.tsv").is_file() {
+        Some(dir)
+    } else {
+        eprintln!("skipping: no data at {} (set ANYMO_DATA to the shared data folder)", dir.display());
+        None
+    }
+}
+
+/// Every file below `dir` whose name ends with `suffix`, sorted.
+pub fn files_with_suffix(dir: &Path, suffix: &str) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).expect("data folder is readable") {
+            let path = entry.expect("data folder entry").path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.to_string_lossy().ends_with(suffix) {
+                out.push(path);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A scratch directory unique to one test, emptied first.
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("anymo-tests-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}

@@ -1,0 +1,162 @@
+//! Motion: per-frame local rotations and translations of every joint of a skeleton, decoded
+//! from BVH channels and encoded back to them.
+
+use crate::bvh::Bvh;
+use crate::rotation::{euler_to_quat, quat_to_euler};
+use crate::skeleton::{Channel, Skeleton};
+use glam::{Quat, Vec3};
+
+/// A motion on a skeleton: for every frame and joint, the local rotation and the local
+/// translation (the joint's offset, with any position channels replacing its components).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Motion {
+    skeleton: Skeleton,
+    frame_time: f64,
+    frames: usize,
+    rotations: Vec<Quat>,
+    translations: Vec<Vec3>,
+}
+
+/// Why arrays do not make a motion.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum MotionError {
+    /// Rotation or translation arrays whose length is not frames x joints.
+    #[error("expected {expected} rotations and translations (frames x joints), got {rotations} and {translations}")]
+    Shape {
+        /// frames x joints.
+        expected: usize,
+        /// Rotations given.
+        rotations: usize,
+        /// Translations given.
+        translations: usize,
+    },
+    /// Frame time zero, negative or not finite.
+    #[error("frame time must be a positive number of seconds, got {0}")]
+    FrameTime(f64),
+}
+
+impl Motion {
+    /// Builds a motion from frame-major arrays of `frames x skeleton.len()` local transforms.
+    pub fn new(
+        skeleton: Skeleton,
+        frame_time: f64,
+        rotations: Vec<Quat>,
+        translations: Vec<Vec3>,
+    ) -> Result<Motion, MotionError> {
+        let joints = skeleton.len();
+        let frames = rotations.len() / joints;
+        if rotations.len() != frames * joints || translations.len() != rotations.len() {
+            return Err(MotionError::Shape {
+                expected: frames * joints,
+                rotations: rotations.len(),
+                translations: translations.len(),
+            });
+        }
+        if !(frame_time.is_finite() && frame_time > 0.0) {
+            return Err(MotionError::FrameTime(frame_time));
+        }
+        Ok(Motion { skeleton, frame_time, frames, rotations, translations })
+    }
+
+    /// Decodes the channels of a BVH file (Euler angles compose in the file's channel order).
+    pub fn from_bvh(bvh: &Bvh) -> Motion {
+        let skeleton = bvh.skeleton().clone();
+        let joints = skeleton.len();
+        let mut rotations = Vec::with_capacity(bvh.frames() * joints);
+        let mut translations = Vec::with_capacity(bvh.frames() * joints);
+        let orders: Vec<_> = skeleton.joints().iter().map(|j| j.channels.euler_order()).collect();
+        for frame in 0..bvh.frames() {
+            let mut values = bvh.frame(frame).iter();
+            for (joint, order) in skeleton.joints().iter().zip(&orders) {
+                let mut translation = joint.offset;
+                let mut angles = [0.0f32; 3];
+                let axes = order.axes();
+                for channel in joint.channels.as_slice() {
+                    let v = *values.next().expect("a frame holds every channel");
+                    match channel {
+                        Channel::Position(axis) => translation[axis.index()] = v,
+                        Channel::Rotation(axis) => {
+                            let slot = axes.iter().position(|a| a == axis).expect("order covers every axis");
+                            angles[slot] = v;
+                        }
+                    }
+                }
+                rotations.push(euler_to_quat(*order, angles));
+                translations.push(translation);
+            }
+        }
+        Motion { skeleton, frame_time: bvh.frame_time(), frames: bvh.frames(), rotations, translations }
+    }
+
+    /// Encodes the motion as channel values of its skeleton's channel layout. Rotations of joints
+    /// without rotation channels and translations of joints without position channels are not
+    /// representable and are dropped (they are the rest pose in any motion read from a file).
+    pub fn to_bvh(&self) -> Bvh {
+        let skeleton = &self.skeleton;
+        let mut values = Vec::with_capacity(self.frames * skeleton.channel_count());
+        for frame in 0..self.frames {
+            for (j, joint) in skeleton.joints().iter().enumerate() {
+                let order = joint.channels.euler_order();
+                let k = frame * skeleton.len() + j;
+                let angles = quat_to_euler(order, self.rotations[k]);
+                let axes = order.axes();
+                for channel in joint.channels.as_slice() {
+                    values.push(match channel {
+                        Channel::Position(axis) => self.translations[k][axis.index()],
+                        Channel::Rotation(axis) => {
+                            angles[axes.iter().position(|a| a == axis).expect("order covers every axis")]
+                        }
+                    });
+                }
+            }
+        }
+        Bvh::new(skeleton.clone(), self.frame_time, self.frames, values).expect("the layout matches the skeleton")
+    }
+
+    /// The skeleton.
+    pub fn skeleton(&self) -> &Skeleton {
+        &self.skeleton
+    }
+
+    /// Seconds per frame.
+    pub fn frame_time(&self) -> f64 {
+        self.frame_time
+    }
+
+    /// Frames per second.
+    pub fn fps(&self) -> f64 {
+        1.0 / self.frame_time
+    }
+
+    /// The number of frames.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// Local rotations of every joint in `frame`.
+    pub fn rotations(&self, frame: usize) -> &[Quat] {
+        let j = self.skeleton.len();
+        &self.rotations[frame * j..(frame + 1) * j]
+    }
+
+    /// Local translations of every joint in `frame`.
+    pub fn translations(&self, frame: usize) -> &[Vec3] {
+        let j = self.skeleton.len();
+        &self.translations[frame * j..(frame + 1) * j]
+    }
+
+    /// All local rotations, frame-major.
+    pub fn all_rotations(&self) -> &[Quat] {
+        &self.rotations
+    }
+
+    /// All local translations, frame-major.
+    pub fn all_translations(&self) -> &[Vec3] {
+        &self.translations
+    }
+
+    /// Splits the motion into its skeleton, frame time, rotations and translations.
+    pub fn into_parts(self) -> (Skeleton, f64, Vec<Quat>, Vec<Vec3>) {
+        (self.skeleton, self.frame_time, self.rotations, self.translations)
+    }
+}
