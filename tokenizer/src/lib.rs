@@ -18,7 +18,11 @@
 //! ```
 
 pub mod bvh;
+pub mod features;
+pub mod gltf;
 pub mod kinematics;
+pub mod metrics;
 pub mod motion;
+pub mod prep;
 pub mod rotation;
 pub mod skeleton;

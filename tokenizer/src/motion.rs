@@ -3,7 +3,7 @@
 
 use crate::bvh::Bvh;
 use crate::rotation::{euler_to_quat, quat_to_euler};
-use crate::skeleton::{Channel, Skeleton};
+use crate::skeleton::{Channel, Channels, EulerOrder, Joint, Skeleton};
 use glam::{Quat, Vec3};
 
 /// A motion on a skeleton: for every frame and joint, the local rotation and the local
@@ -111,6 +111,50 @@ impl Motion {
             }
         }
         Bvh::new(skeleton.clone(), self.frame_time, self.frames, values).expect("the layout matches the skeleton")
+    }
+
+    /// The motion resampled at `fps`: rotations by slerp and translations linearly between the
+    /// two nearest source frames, covering the same time span (first to last frame).
+    pub fn resample(&self, fps: f64) -> Motion {
+        let n = self.skeleton.len();
+        if self.frames == 0 {
+            return Motion { frame_time: 1.0 / fps, ..self.clone() };
+        }
+        let span = (self.frames - 1) as f64 * self.frame_time;
+        let frames = (span * fps).round() as usize + 1;
+        let mut rotations = Vec::with_capacity(frames * n);
+        let mut translations = Vec::with_capacity(frames * n);
+        for f in 0..frames {
+            let source = (f as f64 / fps / self.frame_time).min((self.frames - 1) as f64);
+            let a = source.floor() as usize;
+            let b = (a + 1).min(self.frames - 1);
+            let u = (source - a as f64) as f32;
+            for j in 0..n {
+                rotations.push(self.rotations[a * n + j].slerp(self.rotations[b * n + j], u));
+                translations.push(self.translations[a * n + j].lerp(self.translations[b * n + j], u));
+            }
+        }
+        Motion { skeleton: self.skeleton.clone(), frame_time: 1.0 / fps, frames, rotations, translations }
+    }
+
+    /// The same motion on a skeleton whose joints use `order` for their rotation channels.
+    pub fn with_euler_order(&self, order: EulerOrder) -> Motion {
+        let joints = self
+            .skeleton
+            .joints()
+            .iter()
+            .map(|j| {
+                let has_rotation = j.channels.as_slice().iter().any(|c| matches!(c, Channel::Rotation(_)));
+                let channels = match (j.channels.has_position(), has_rotation) {
+                    (true, _) => Channels::position_rotation(order),
+                    (false, true) => Channels::rotation(order),
+                    (false, false) => j.channels.clone(),
+                };
+                Joint { channels, ..j.clone() }
+            })
+            .collect();
+        let skeleton = Skeleton::new(joints).expect("same tree");
+        Motion { skeleton, ..self.clone() }
     }
 
     /// The skeleton.

@@ -1,0 +1,107 @@
+//! Reconstruction and transfer metrics of `../shared/docs/EVAL.md`: MPJPE (with and without
+//! translation), GeoDist, foot skating, ground penetration and the SAN transfer error.
+//!
+//! Positions are frame-major slices of `frames x joints`; scale skeletons to diameter 1 first
+//! (see [`crate::prep::clean`]) to get diameter-normalised figures.
+
+use crate::rotation::geodesic_angle;
+use glam::{Quat, Vec3};
+
+/// Mean Euclidean distance between corresponding joints over all joints and frames, with the
+/// global translation included ("MPJPE (with trans)").
+pub fn mpjpe(predicted: &[Vec3], truth: &[Vec3]) -> f32 {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    mean(predicted.iter().zip(truth).map(|(p, t)| p.distance(*t)))
+}
+
+/// MPJPE after aligning the root (joint 0 of each frame) of the prediction to the truth's.
+pub fn mpjpe_root_aligned(predicted: &[Vec3], truth: &[Vec3], joints: usize) -> f32 {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    let errors = predicted.chunks(joints).zip(truth.chunks(joints)).flat_map(|(p, t)| {
+        let (pr, tr) = (p[0], t[0]);
+        p.iter().zip(t).map(move |(a, b)| (*a - pr).distance(*b - tr))
+    });
+    mean(errors)
+}
+
+/// Mean geodesic angle in degrees between corresponding local rotations.
+pub fn geodesic_distance_deg(predicted: &[Quat], truth: &[Quat]) -> f32 {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    mean(predicted.iter().zip(truth).map(|(p, t)| geodesic_angle(*p, *t).to_degrees()))
+}
+
+/// Foot skating: the mean horizontal speed (units per second) of the given foot joints over the
+/// frames where they are in contact (height at most `contact_height` above y = 0 in both frames
+/// of a step). Zero when no foot is ever in contact.
+pub fn foot_skating(positions: &[Vec3], joints: usize, feet: &[usize], fps: f32, contact_height: f32) -> f32 {
+    let frames = positions.len() / joints;
+    let speeds = (1..frames).flat_map(|f| {
+        feet.iter().filter_map(move |&j| {
+            let (a, b) = (positions[(f - 1) * joints + j], positions[f * joints + j]);
+            (a.y <= contact_height && b.y <= contact_height).then(|| (b - a).with_y(0.0).length() * fps)
+        })
+    });
+    mean(speeds)
+}
+
+/// Ground penetration: the mean depth below the floor (y = 0) over all joints and frames,
+/// counting joints above the floor as zero.
+pub fn ground_penetration(positions: &[Vec3]) -> f32 {
+    mean(positions.iter().map(|p| (-p.y).max(0.0)))
+}
+
+/// The SAN transfer error: 1000 x mean squared global position error / target height^2.
+pub fn transfer_error(predicted: &[Vec3], truth: &[Vec3], target_height: f32) -> f32 {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    1000.0 * mean(predicted.iter().zip(truth).map(|(p, t)| p.distance_squared(*t))) / (target_height * target_height)
+}
+
+fn mean(values: impl Iterator<Item = f32>) -> f32 {
+    let (sum, count) = values.fold((0.0f64, 0usize), |(s, c), v| (s + v as f64, c + 1));
+    if count == 0 { 0.0 } else { (sum / count as f64) as f32 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mpjpe_with_and_without_translation() {
+        // Two frames of two joints; the prediction is the truth shifted by (3, 4, 0) with the
+        // second joint also off by 1 in y in frame 1.
+        let truth = [Vec3::ZERO, Vec3::Y, Vec3::X, Vec3::X + Vec3::Y];
+        let shift = Vec3::new(3.0, 4.0, 0.0);
+        let mut predicted: Vec<Vec3> = truth.iter().map(|p| *p + shift).collect();
+        predicted[3].y += 1.0;
+        // Distances 5, 5, 5, |(3, 5, 0)| = sqrt(34).
+        let expected = (15.0 + 34f32.sqrt()) / 4.0;
+        assert!((mpjpe(&predicted, &truth) - expected).abs() < 1e-5);
+        // Root-aligned: only the 1 in frame 1 remains, over 4 joint-frames.
+        assert!((mpjpe_root_aligned(&predicted, &truth, 2) - 0.25).abs() < 1e-6);
+    }
+
+    #[test]
+    fn geodesic_distance_in_degrees() {
+        let a = [Quat::IDENTITY, Quat::from_rotation_x(0.5)];
+        let b = [Quat::from_rotation_y(30f32.to_radians()), Quat::from_rotation_x(0.5)];
+        assert!((geodesic_distance_deg(&a, &b) - 15.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn skating_counts_only_grounded_sliding() {
+        // One foot, three frames at 10 fps: slides 0.1 on the ground, then lifts off.
+        let p = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.1, 0.01, 0.0), Vec3::new(0.5, 0.5, 0.0)];
+        let fs = foot_skating(&p, 1, &[0], 10.0, 0.02);
+        assert!((fs - 1.0).abs() < 1e-5, "{fs}");
+        assert_eq!(foot_skating(&p, 1, &[0], 10.0, 0.001), 0.0);
+    }
+
+    #[test]
+    fn penetration_and_transfer_error() {
+        let p = [Vec3::new(0.0, -0.2, 0.0), Vec3::new(0.0, 0.3, 0.0)];
+        assert!((ground_penetration(&p) - 0.1).abs() < 1e-6);
+        let t = [Vec3::new(0.0, -0.2, 0.1), Vec3::new(0.0, 0.3, 0.0)];
+        // Mean squared error 0.005, height 2: 1000 * 0.005 / 4 = 1.25.
+        assert!((transfer_error(&p, &t, 2.0) - 1.25).abs() < 1e-4);
+    }
+}
