@@ -8,6 +8,7 @@
 //! targets, meshes, cameras) are dropped.
 
 use crate::motion::Motion;
+use crate::prep::labels::label_name;
 use crate::skeleton::{Channels, EulerOrder, Joint, Skeleton};
 use glam::{Mat4, Quat, Vec3};
 use gltf::animation::util::ReadOutputs;
@@ -71,7 +72,18 @@ impl GltfAsset {
     /// channels in `order` (the root also gets position channels).
     pub fn open(path: impl AsRef<Path>, order: EulerOrder) -> Result<GltfAsset, GltfError> {
         let path = path.as_ref();
-        let gltf::Gltf { document, blob } = gltf::Gltf::open(path)?;
+        let bytes = std::fs::read(path).map_err(|e| GltfError::Gltf(gltf::Error::Io(e)))?;
+        // Draco-compressed meshes fail validation; the skeleton and animations do not need them.
+        let (gltf::Gltf { document, blob }, meshes_readable) = match gltf::Gltf::from_slice(&bytes) {
+            Ok(gltf) => (gltf, true),
+            Err(error) => {
+                let gltf = gltf::Gltf::from_slice_without_validation(&bytes)?;
+                if !gltf.document.extensions_required().any(|e| e == "KHR_draco_mesh_compression") {
+                    return Err(error.into());
+                }
+                (gltf, false)
+            }
+        };
         let buffers = gltf::import_buffers(&document, path.parent(), blob)?;
         let skin = document.skins().max_by_key(|s| s.joints().count()).ok_or(GltfError::NoSkin)?;
 
@@ -81,7 +93,11 @@ impl GltfAsset {
                 parent_of_node.insert(child.index(), node.index());
             }
         }
-        let in_skin = deforming_joints(&document, &buffers, &skin, &parent_of_node);
+        let in_skin = if meshes_readable {
+            deforming_joints(&document, &buffers, &skin, &parent_of_node)
+        } else {
+            anatomical_joints(&document, &skin, &parent_of_node)
+        };
         // The nearest ancestor of each joint that is also a joint.
         let joint_parent = |node: usize| {
             let mut at = node;
@@ -320,6 +336,32 @@ fn deforming_joints(
         }
     }
     joints.into_iter().zip(deforms).filter(|(_, d)| *d).map(|(n, _)| n).collect()
+}
+
+/// Without readable meshes, the skin's joints minus branches whose every joint is a rig helper
+/// by name (pole targets, IK controls with nothing anatomical below them).
+fn anatomical_joints(
+    document: &gltf::Document,
+    skin: &gltf::Skin<'_>,
+    parent_of_node: &HashMap<usize, usize>,
+) -> Vec<usize> {
+    let joints: Vec<usize> = skin.joints().map(|n| n.index()).collect();
+    let name_of =
+        |n: usize| document.nodes().nth(n).and_then(|node| node.name().map(str::to_string)).unwrap_or_default();
+    let mut keep = vec![false; joints.len()];
+    for (k, &node) in joints.iter().enumerate() {
+        if !label_name(&name_of(node)).helper {
+            keep[k] = true;
+            let mut at = node;
+            while let Some(&p) = parent_of_node.get(&at) {
+                if let Some(i) = joints.iter().position(|&n| n == p) {
+                    keep[i] = true;
+                }
+                at = p;
+            }
+        }
+    }
+    joints.into_iter().zip(keep).filter(|(_, k)| *k).map(|(n, _)| n).collect()
 }
 
 fn animation_name(animation: &gltf::Animation<'_>) -> String {

@@ -127,7 +127,7 @@ impl<'r, R: BufRead> Lexer<'r, R> {
     fn require(&mut self, expected: &'static str) -> Result<Token, BvhError> {
         match self.next()? {
             Some(t) => Ok(t),
-            None => Err(self.eof_error(SyntaxError::Expected { expected, found: Found::EndOfFile })),
+            None => Err(self.end_of_line_error(SyntaxError::Expected { expected, found: Found::EndOfFile })),
         }
     }
 
@@ -140,7 +140,7 @@ impl<'r, R: BufRead> Lexer<'r, R> {
     fn on_this_line(&mut self, expected: &'static str) -> Result<Token, BvhError> {
         self.skip_space();
         if self.pos >= self.line.len() {
-            return Err(self.here(SyntaxError::Expected { expected, found: Found::EndOfLine }));
+            return Err(self.end_of_line_error(SyntaxError::Expected { expected, found: Found::EndOfLine }));
         }
         Ok(self.next()?.expect("a token is left on this line"))
     }
@@ -150,7 +150,7 @@ impl<'r, R: BufRead> Lexer<'r, R> {
         self.skip_space();
         let text = self.line[self.pos..].trim_end();
         if text.is_empty() {
-            return Err(self.here(SyntaxError::Expected { expected, found: Found::EndOfLine }));
+            return Err(self.end_of_line_error(SyntaxError::Expected { expected, found: Found::EndOfLine }));
         }
         let token = Token { text: text.to_string(), line: self.line_no, column: self.pos + 1 };
         self.pos = self.line.len();
@@ -170,7 +170,8 @@ impl<'r, R: BufRead> Lexer<'r, R> {
         BvhError::Syntax { line: self.line_no.max(1), column: self.pos + 1, kind }
     }
 
-    fn eof_error(&self, kind: SyntaxError) -> BvhError {
+    /// An error placed just after the last character of the current line.
+    fn end_of_line_error(&self, kind: SyntaxError) -> BvhError {
         BvhError::Syntax { line: self.line_no.max(1), column: self.line.trim_end().len() + 1, kind }
     }
 }

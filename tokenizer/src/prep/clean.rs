@@ -71,8 +71,8 @@ pub struct CleanClip {
     pub scale: f32,
     /// The original skeleton.
     pub original: Skeleton,
-    /// The original root's constant global transform for every collapsed dummy root (outermost
-    /// first), in original units.
+    /// Each collapsed dummy root (outermost first) with its local transform in the first frame,
+    /// in original units: restored motions hold it there and give the rest to its child.
     collapsed: Vec<(usize, Transform)>,
 }
 
@@ -92,13 +92,15 @@ pub fn clean(motion: &Motion, options: &CleanOptions) -> Result<CleanClip, Rejec
         keep[i] = keep[parent] && !is_helper_branch(&joint.name);
     }
 
-    // 2. Collapse static dummy roots with a single kept child.
+    // 2. Collapse dummy roots (static, or named as rig roots) with a single kept child: the
+    // child takes over their transform, frame by frame.
     let mut root = 0;
     let mut collapsed = Vec::new();
     let frames = motion.frames();
     loop {
         let kids: Vec<usize> = original.children(root).filter(|&c| keep[c]).collect();
-        if kids.len() != 1 || !is_static(motion, root, options.static_tolerance) {
+        let dummy = label_name(&joints[root].name).helper || is_static(motion, root, options.static_tolerance);
+        if kids.len() != 1 || !dummy || original.is_leaf(kids[0]) {
             break;
         }
         let t = Transform { rotation: motion.rotations(0)[root], translation: motion.translations(0)[root] };
@@ -114,9 +116,6 @@ pub fn clean(motion: &Motion, options: &CleanOptions) -> Result<CleanClip, Rejec
     for (k, &i) in source_joint.iter().enumerate() {
         new_index[i] = k;
     }
-
-    // The collapsed roots' constant transform, applied to the new root every frame.
-    let base = collapsed.iter().fold(Transform::IDENTITY, |acc, (_, t)| compose(acc, *t));
 
     // 3. Translation on the root only: other joints keep their mean translation as the offset.
     let diameter_guess = original.diameter();
@@ -178,6 +177,9 @@ pub fn clean(motion: &Motion, options: &CleanOptions) -> Result<CleanClip, Rejec
         let (rot, trans) = (motion.rotations(f), motion.translations(f));
         for (k, &i) in source_joint.iter().enumerate() {
             if k == 0 {
+                let base = collapsed.iter().fold(Transform::IDENTITY, |acc, (r, _)| {
+                    compose(acc, Transform { rotation: rot[*r], translation: trans[*r] })
+                });
                 let t = compose(base, Transform { rotation: rot[i], translation: trans[i] });
                 rotations.push(t.rotation);
                 translations.push(t.translation * scale);
@@ -194,7 +196,8 @@ pub fn clean(motion: &Motion, options: &CleanOptions) -> Result<CleanClip, Rejec
 impl CleanClip {
     /// Writes a motion on the cleaned skeleton (this clip's, or a model's output for it) back onto
     /// the original skeleton: dropped joints return to the values they had in the first frame of
-    /// the source clip, collapsed roots to their constant transform, units to the original ones.
+    /// the source clip (collapsed roots too, their child carrying the motion), units to the
+    /// original ones. Every kept joint's global position is reproduced.
     pub fn restore(&self, cleaned: &Motion, source: &Motion) -> Motion {
         let n = self.original.len();
         let frames = cleaned.frames();

@@ -113,7 +113,7 @@ const SYNONYMS: &[(&str, &str)] = &[
     ("weapon", "prop"),
     ("virtualroot", "root"),
     ("boneroot", "root"),
-    ("main", "root"),
+    ("main", "body"),
 ];
 
 /// Words that mark a rig helper rather than a body part.

@@ -1,0 +1,146 @@
+//! Cleaning, canonicalisation, features and augmentation on the real corpus: every step either
+//! keeps the motion exactly or changes it in the one way it means to.
+
+use anymo_tests::{data_dir, files_with_suffix};
+use anymo_tokenizer::bvh::{self, ReadOptions};
+use anymo_tokenizer::features::{canonicalise, from_features, to_features};
+use anymo_tokenizer::kinematics::all_joint_positions;
+use anymo_tokenizer::motion::Motion;
+use anymo_tokenizer::prep::augment::{mirror, rebase_rest_pose, scale_bones};
+use anymo_tokenizer::prep::clean::{CleanOptions, clean};
+use anymo_tokenizer::prep::labels::{label_skeleton, mirror_pairs};
+use glam::Vec3;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+fn corpus_sample(step: usize) -> Option<Vec<PathBuf>> {
+    let dir = data_dir()?;
+    Some(files_with_suffix(&dir, ".bvh.gz").into_iter().step_by(step).collect())
+}
+
+fn load(path: &PathBuf) -> Motion {
+    Motion::from_bvh(&bvh::read_path(path, ReadOptions { require_motion: true }).unwrap())
+}
+
+fn worst_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter().zip(b).map(|(p, q)| p.distance(*q)).fold(0.0, f32::max)
+}
+
+#[test]
+fn cleaning_restores_exactly_onto_the_original_skeleton() {
+    let Some(files) = corpus_sample(5) else { return };
+    let mut rejected: BTreeMap<String, usize> = BTreeMap::new();
+    for path in &files {
+        let motion = load(path);
+        let cleaned = match clean(&motion, &CleanOptions::default()) {
+            Ok(c) => c,
+            Err(reason) => {
+                *rejected.entry(reason.to_string()).or_default() += 1;
+                continue;
+            }
+        };
+        let skeleton = cleaned.motion.skeleton();
+        assert!((skeleton.diameter() - 1.0).abs() < 1e-4, "{}", path.display());
+        // Only the root translates.
+        for f in 0..cleaned.motion.frames() {
+            for (j, t) in cleaned.motion.translations(f).iter().enumerate().skip(1) {
+                assert_eq!(*t, skeleton.joint(j).offset);
+            }
+        }
+        let restored = cleaned.restore(&cleaned.motion, &motion);
+        assert_eq!(restored.skeleton(), motion.skeleton(), "the user's skeleton is untouched");
+        let (a, b) = (all_joint_positions(&motion), all_joint_positions(&restored));
+        let n = motion.skeleton().len();
+        let diameter = motion.skeleton().diameter();
+        for &j in &cleaned.source_joint {
+            let worst = (0..motion.frames()).map(|f| a[f * n + j].distance(b[f * n + j])).fold(0.0, f32::max);
+            assert!(worst <= 0.06 * diameter, "{}: joint {j} moved {worst}", path.display());
+        }
+    }
+    eprintln!("{} clips; rejected: {rejected:?}", files.len());
+    assert!(rejected.values().sum::<usize>() * 10 < files.len(), "most clips are usable: {rejected:?}");
+}
+
+#[test]
+fn clean_clips_drop_helpers_and_collapse_dummy_roots() {
+    let Some(dir) = data_dir() else { return };
+    let bandai = load(&dir.join("bandai/dataset-1/dataset-1_bow_active_001.bvh.gz"));
+    let cleaned = clean(&bandai, &CleanOptions::default()).unwrap();
+    // Bandai's static `joint_Root` is folded into `Hips`.
+    assert_eq!(cleaned.motion.skeleton().joint(0).name, "Hips");
+    assert_eq!(cleaned.motion.skeleton().len(), bandai.skeleton().len() - 1);
+    let horse = load(&dir.join("quaternius/bvh/animals_pack/Horse__Walk.bvh.gz"));
+    let cleaned = clean(&horse, &CleanOptions::default()).unwrap();
+    let names: Vec<&str> = cleaned.motion.skeleton().joints().iter().map(|j| j.name.as_str()).collect();
+    assert!(!names.iter().any(|n| n.contains("PoleTarget") || n.starts_with("IK")), "{names:?}");
+    assert_ne!(names[0], "VirtualRoot");
+}
+
+#[test]
+fn features_rebuild_canonical_clips() {
+    let Some(files) = corpus_sample(9) else { return };
+    for path in &files {
+        let Ok(cleaned) = clean(&load(path), &CleanOptions::default()) else { continue };
+        let canonical = canonicalise(&cleaned.motion);
+        let (features, start) = to_features(&canonical);
+        assert!(start.planar[0].abs() < 1e-5 && start.planar[1].abs() < 1e-5);
+        let back = from_features(&features, start, canonical.skeleton(), canonical.frame_time());
+        let worst = worst_distance(&all_joint_positions(&canonical), &all_joint_positions(&back));
+        // Diameter 1: the rebuilt motion is within a thousandth of the skeleton's size.
+        assert!(worst < 1e-3, "{}: features moved joints by {worst}", path.display());
+    }
+}
+
+#[test]
+fn rebasing_the_rest_pose_keeps_every_position() {
+    let Some(files) = corpus_sample(29) else { return };
+    for path in &files {
+        let motion = load(path);
+        let rebased = rebase_rest_pose(&motion, motion.frames() / 2);
+        assert_ne!(rebased.skeleton(), motion.skeleton());
+        let worst = worst_distance(&all_joint_positions(&motion), &all_joint_positions(&rebased));
+        assert!(worst < 1e-4 * motion.skeleton().diameter().max(1.0), "{}: {worst}", path.display());
+    }
+}
+
+#[test]
+fn mirroring_swaps_sides_and_twice_is_the_identity() {
+    let Some(dir) = data_dir() else { return };
+    for clip in ["bandai/dataset-1/dataset-1_bow_active_001.bvh.gz", "quaternius/bvh/animals_pack/Horse__Walk.bvh.gz"] {
+        let motion = clean(&load(&dir.join(clip)), &CleanOptions::default()).unwrap().motion;
+        let pair = mirror_pairs(&label_skeleton(motion.skeleton()));
+        assert!(pair.iter().enumerate().any(|(i, &p)| i != p), "{clip}: has left/right pairs");
+        let mirrored = mirror(&motion).unwrap();
+        let (a, b) = (all_joint_positions(&motion), all_joint_positions(&mirrored));
+        let n = motion.skeleton().len();
+        for f in 0..motion.frames() {
+            for j in 0..n {
+                let expected = a[f * n + pair[j]] * Vec3::new(-1.0, 1.0, 1.0);
+                assert!(b[f * n + j].distance(expected) < 1e-4, "{clip} frame {f} joint {j}");
+            }
+        }
+        let twice = mirror(&mirrored).unwrap();
+        assert!(worst_distance(&a, &all_joint_positions(&twice)) < 1e-4);
+    }
+}
+
+#[test]
+fn bone_scaling_scales_the_body_not_the_path() {
+    let Some(dir) = data_dir() else { return };
+    let motion = clean(&load(&dir.join("bandai/dataset-1/dataset-1_bow_active_001.bvh.gz")), &CleanOptions::default())
+        .unwrap()
+        .motion;
+    let n = motion.skeleton().len();
+    let mut factors = vec![2.0; n];
+    factors[0] = 1.0;
+    let scaled = scale_bones(&motion, &factors);
+    assert!((scaled.skeleton().diameter() - 2.0).abs() < 1e-4);
+    let (a, b) = (all_joint_positions(&motion), all_joint_positions(&scaled));
+    for f in 0..motion.frames() {
+        let (ra, rb) = (a[f * n], b[f * n]);
+        assert!(ra.distance(rb) < 1e-6, "the root path is kept");
+        for j in 1..n {
+            assert!(((b[f * n + j] - rb) - (a[f * n + j] - ra) * 2.0).length() < 1e-4);
+        }
+    }
+}
