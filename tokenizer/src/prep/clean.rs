@@ -1,12 +1,13 @@
-//! Cleaning for model input (NEC appendix B): rig helpers dropped, static dummy roots collapsed
-//! into their child, translation kept on the root only, clips with abnormal bones rejected with a
-//! reason, and everything scaled so the skeleton's diameter is 1.
+//! Cleaning for model input (NEC appendix B): rig helpers dropped, limbs that float on a dummy
+//! root (IK-driven feet) re-attached to the body, dummy roots collapsed into their child,
+//! translation kept on the root only, clips with abnormal bones rejected with a reason, and
+//! everything scaled so the skeleton's diameter is 1.
 //!
 //! Cleaning never changes what a user gets back: [`CleanClip::restore`] writes a cleaned motion
-//! onto the original skeleton, exactly undoing every step.
+//! onto the original skeleton, reproducing every kept joint's global position.
 
 use super::labels::label_name;
-use crate::kinematics::Transform;
+use crate::kinematics::{Transform, all_global_transforms};
 use crate::motion::Motion;
 use crate::skeleton::{Joint, Skeleton};
 use glam::Vec3;
@@ -21,11 +22,20 @@ pub struct CleanOptions {
     pub max_translation_drift: f32,
     /// Motion this close to constant (diameter units, or radians) counts as static.
     pub static_tolerance: f32,
+    /// A child branch of a dummy root with at most this fraction of the joints of the largest
+    /// branch is a floating limb (an IK-driven foot), re-attached to the joint of the largest
+    /// branch it moves most rigidly with.
+    pub floating_limb_fraction: f32,
 }
 
 impl Default for CleanOptions {
     fn default() -> Self {
-        CleanOptions { max_bone_fraction: 0.75, max_translation_drift: 0.05, static_tolerance: 1e-4 }
+        CleanOptions {
+            max_bone_fraction: 0.75,
+            max_translation_drift: 0.05,
+            static_tolerance: 1e-4,
+            floating_limb_fraction: 0.25,
+        }
     }
 }
 
@@ -35,7 +45,7 @@ pub enum Rejection {
     /// No motion.
     #[error("the clip has no frames")]
     NoFrames,
-    /// Every joint at the same place in the rest pose.
+    /// Every joint at the same place.
     #[error("the skeleton has zero size (all offsets are zero)")]
     ZeroSize,
     /// One bone dominates the skeleton.
@@ -51,7 +61,7 @@ pub enum Rejection {
     /// Bone lengths change from frame to frame.
     #[error("joint {joint:?} moves {drift:.3} diameters off its mean offset (limit {limit:.3})")]
     TranslationDrift {
-        /// The joint whose translation channels drift.
+        /// The joint whose translation drifts.
         joint: String,
         /// The largest drift, in diameters.
         drift: f32,
@@ -67,13 +77,10 @@ pub struct CleanClip {
     pub motion: Motion,
     /// For each cleaned joint, its index in the original skeleton.
     pub source_joint: Vec<usize>,
-    /// The factor the original units were multiplied by (1 / original diameter).
+    /// The factor the original units were multiplied by (1 / cleaned diameter in original units).
     pub scale: f32,
     /// The original skeleton.
     pub original: Skeleton,
-    /// Each collapsed dummy root (outermost first) with its local transform in the first frame,
-    /// in original units: restored motions hold it there and give the rest to its child.
-    collapsed: Vec<(usize, Transform)>,
 }
 
 /// Cleans a motion for model input, or says why it cannot be used.
@@ -81,153 +88,209 @@ pub fn clean(motion: &Motion, options: &CleanOptions) -> Result<CleanClip, Rejec
     if motion.frames() == 0 {
         return Err(Rejection::NoFrames);
     }
-    let original = motion.skeleton().clone();
+    let original = motion.skeleton();
     let joints = original.joints();
     let n = original.len();
+    let frames = motion.frames();
+    let globals = all_global_transforms(motion);
 
-    // 1. Drop helper subtrees (IK and pole targets, props) hanging anywhere below the root.
+    // 1. Drop helper branches (IK and pole targets, props) hanging anywhere below the root.
     let mut keep = vec![true; n];
     for (i, joint) in joints.iter().enumerate().skip(1) {
         let parent = joint.parent.expect("non-root");
         keep[i] = keep[parent] && !is_helper_branch(&joint.name);
     }
+    let mut parent: Vec<Option<usize>> = joints.iter().map(|j| j.parent).collect();
 
-    // 2. Collapse dummy roots (static, or named as rig roots) with a single kept child: the
-    // child takes over their transform, frame by frame.
+    // 2. Walk down dummy roots: re-attach floating limbs, then collapse while one child remains.
     let mut root = 0;
-    let mut collapsed = Vec::new();
-    let frames = motion.frames();
     loop {
-        let kids: Vec<usize> = original.children(root).filter(|&c| keep[c]).collect();
         let dummy = label_name(&joints[root].name).helper || is_static(motion, root, options.static_tolerance);
-        if kids.len() != 1 || !dummy || original.is_leaf(kids[0]) {
+        if !dummy {
             break;
         }
-        let t = Transform { rotation: motion.rotations(0)[root], translation: motion.translations(0)[root] };
-        collapsed.push((root, t));
+        let kids: Vec<usize> = (0..n).filter(|&c| keep[c] && parent[c] == Some(root)).collect();
+        if kids.len() > 1 {
+            reattach_floating_limbs(root, &kids, &mut parent, &keep, &globals, options.floating_limb_fraction);
+        }
+        let kids: Vec<usize> = (0..n).filter(|&c| keep[c] && parent[c] == Some(root)).collect();
+        if kids.len() != 1 || !(0..n).any(|d| keep[d] && parent[d] == Some(kids[0])) {
+            break;
+        }
         keep[root] = false;
+        parent[kids[0]] = None;
         root = kids[0];
     }
 
-    // Build the cleaned skeleton: kept joints in original order, `root` first.
-    let source_joint: Vec<usize> = (0..n).filter(|&i| keep[i]).collect();
-    debug_assert_eq!(source_joint[0], root);
+    // The cleaned tree in depth-first order, children in original order.
+    let mut order = Vec::with_capacity(n);
+    let mut stack = vec![root];
+    while let Some(j) = stack.pop() {
+        order.push(j);
+        let kids: Vec<usize> = (0..n).filter(|&c| keep[c] && parent[c] == Some(j)).collect();
+        stack.extend(kids.into_iter().rev());
+    }
     let mut new_index = vec![usize::MAX; n];
-    for (k, &i) in source_joint.iter().enumerate() {
-        new_index[i] = k;
+    for (k, &j) in order.iter().enumerate() {
+        new_index[j] = k;
     }
 
-    // 3. Translation on the root only: other joints keep their mean translation as the offset.
-    let diameter_guess = original.diameter();
-    let mut offsets = Vec::with_capacity(source_joint.len());
-    for &i in &source_joint {
-        let mean = (0..frames).map(|f| motion.translations(f)[i]).sum::<Vec3>() / frames as f32;
-        offsets.push(mean);
+    // 3. Local transforms in the cleaned tree, from the original global ones. Non-root joints
+    // keep their mean translation as the offset; only the root moves.
+    let m = order.len();
+    let mut rotations = Vec::with_capacity(frames * m);
+    let mut translations = Vec::with_capacity(frames * m);
+    for f in 0..frames {
+        let g = &globals[f * n..(f + 1) * n];
+        for &j in &order {
+            let local = match parent[j] {
+                None => g[j],
+                Some(p) => relative(g[p], g[j]),
+            };
+            rotations.push(local.rotation);
+            translations.push(local.translation);
+        }
     }
-
-    let mut new_joints: Vec<Joint> = source_joint
+    let offsets: Vec<Vec3> =
+        (0..m).map(|k| (0..frames).map(|f| translations[f * m + k]).sum::<Vec3>() / frames as f32).collect();
+    let mut new_joints: Vec<Joint> = order
         .iter()
         .enumerate()
-        .map(|(k, &i)| Joint {
-            name: joints[i].name.clone(),
-            parent: if k == 0 { None } else { Some(new_index[joints[i].parent.expect("non-root")]) },
+        .map(|(k, &j)| Joint {
+            name: joints[j].name.clone(),
+            parent: parent[j].map(|p| new_index[p]),
             offset: if k == 0 { Vec3::ZERO } else { offsets[k] },
-            channels: joints[i].channels.clone(),
-            end_site: joints[i].end_site,
+            channels: joints[j].channels.clone(),
+            // Global rotations are unchanged, so an end site keeps its local offset.
+            end_site: joints[j].end_site,
         })
         .collect();
-    let provisional = Skeleton::new(new_joints.clone()).expect("a subtree of a valid skeleton");
-    let diameter = provisional.diameter();
-    if diameter <= f32::EPSILON * diameter_guess.max(1.0) || diameter <= 0.0 {
+    let diameter = Skeleton::new(new_joints.clone()).expect("a tree of kept joints").diameter();
+    if diameter <= f32::EPSILON * original.diameter().max(1.0) {
         return Err(Rejection::ZeroSize);
     }
     let scale = 1.0 / diameter;
 
     // 4. Reject abnormal bones and drifting translations.
-    for (k, &i) in source_joint.iter().enumerate().skip(1) {
+    for (k, &j) in order.iter().enumerate().skip(1) {
         let fraction = offsets[k].length() * scale;
         if fraction > options.max_bone_fraction {
             return Err(Rejection::LongBone {
-                joint: joints[i].name.clone(),
+                joint: joints[j].name.clone(),
                 fraction,
                 limit: options.max_bone_fraction,
             });
         }
-        let drift =
-            (0..frames).map(|f| (motion.translations(f)[i] - offsets[k]).length()).fold(0.0f32, f32::max) * scale;
+        let drift = (0..frames).map(|f| translations[f * m + k].distance(offsets[k])).fold(0.0f32, f32::max) * scale;
         if drift > options.max_translation_drift {
             return Err(Rejection::TranslationDrift {
-                joint: joints[i].name.clone(),
+                joint: joints[j].name.clone(),
                 drift,
                 limit: options.max_translation_drift,
             });
         }
     }
 
-    // 5. Scale to diameter 1 and assemble the motion.
+    // 5. Scale to diameter 1.
     for joint in &mut new_joints {
         joint.offset *= scale;
         joint.end_site = joint.end_site.map(|e| e * scale);
     }
     let skeleton = Skeleton::new(new_joints).expect("scaling keeps a valid skeleton");
-    let m = source_joint.len();
-    let mut rotations = Vec::with_capacity(frames * m);
-    let mut translations = Vec::with_capacity(frames * m);
     for f in 0..frames {
-        let (rot, trans) = (motion.rotations(f), motion.translations(f));
-        for (k, &i) in source_joint.iter().enumerate() {
-            if k == 0 {
-                let base = collapsed.iter().fold(Transform::IDENTITY, |acc, (r, _)| {
-                    compose(acc, Transform { rotation: rot[*r], translation: trans[*r] })
-                });
-                let t = compose(base, Transform { rotation: rot[i], translation: trans[i] });
-                rotations.push(t.rotation);
-                translations.push(t.translation * scale);
-            } else {
-                rotations.push(rot[i]);
-                translations.push(skeleton.joint(k).offset);
-            }
+        translations[f * m] *= scale;
+        for k in 1..m {
+            translations[f * m + k] = skeleton.joint(k).offset;
         }
     }
     let motion = Motion::new(skeleton, motion.frame_time(), rotations, translations).expect("shapes match");
-    Ok(CleanClip { motion, source_joint, scale, original, collapsed })
+    Ok(CleanClip { motion, source_joint: order, scale, original: original.clone() })
 }
 
 impl CleanClip {
     /// Writes a motion on the cleaned skeleton (this clip's, or a model's output for it) back onto
-    /// the original skeleton: dropped joints return to the values they had in the first frame of
-    /// the source clip (collapsed roots too, their child carrying the motion), units to the
-    /// original ones. Every kept joint's global position is reproduced.
+    /// the original skeleton. Kept joints take the cleaned motion's global transforms; dropped
+    /// joints (helpers, collapsed roots) keep their local transform from the first frame of
+    /// `source`. Units go back to the original ones.
     pub fn restore(&self, cleaned: &Motion, source: &Motion) -> Motion {
         let n = self.original.len();
+        let m = self.source_joint.len();
         let frames = cleaned.frames();
-        let base = self.collapsed.iter().fold(Transform::IDENTITY, |acc, (_, t)| compose(acc, *t));
-        let inverse_base = invert(base);
+        let mut cleaned_of = vec![None; n];
+        for (k, &j) in self.source_joint.iter().enumerate() {
+            cleaned_of[j] = Some(k);
+        }
+        let cleaned_globals = all_global_transforms(cleaned);
         let mut rotations = Vec::with_capacity(frames * n);
         let mut translations = Vec::with_capacity(frames * n);
+        let mut g = vec![Transform::IDENTITY; n];
         for f in 0..frames {
-            let mut rot = source.rotations(0).to_vec();
-            let mut trans = source.translations(0).to_vec();
-            for (root, t) in &self.collapsed {
-                rot[*root] = t.rotation;
-                trans[*root] = t.translation;
+            for j in 0..n {
+                let parent = self.original.joint(j).parent;
+                g[j] = match cleaned_of[j] {
+                    Some(k) => {
+                        let t = cleaned_globals[f * m + k];
+                        Transform { rotation: t.rotation, translation: t.translation / self.scale }
+                    }
+                    None => {
+                        let local =
+                            Transform { rotation: source.rotations(0)[j], translation: source.translations(0)[j] };
+                        parent.map_or(local, |p| compose(g[p], local))
+                    }
+                };
+                let local = parent.map_or(g[j], |p| relative(g[p], g[j]));
+                rotations.push(local.rotation);
+                translations.push(local.translation);
             }
-            let (crot, ctrans) = (cleaned.rotations(f), cleaned.translations(f));
-            for (k, &i) in self.source_joint.iter().enumerate() {
-                if k == 0 {
-                    let root = Transform { rotation: crot[0], translation: ctrans[0] / self.scale };
-                    let local = compose(inverse_base, root);
-                    rot[i] = local.rotation;
-                    trans[i] = local.translation;
-                } else {
-                    rot[i] = crot[k];
-                    trans[i] = self.original.joint(i).offset;
-                }
-            }
-            rotations.extend(rot);
-            translations.extend(trans);
         }
         Motion::new(self.original.clone(), cleaned.frame_time(), rotations, translations).expect("shapes match")
+    }
+}
+
+/// Re-parents the small branches among `kids` (children of the dummy root `root`) to the joint
+/// of the largest branch they move most rigidly with, when that is more rigid than the root.
+fn reattach_floating_limbs(
+    root: usize,
+    kids: &[usize],
+    parent: &mut [Option<usize>],
+    keep: &[bool],
+    globals: &[Transform],
+    fraction: f32,
+) {
+    let n = parent.len();
+    let frames = globals.len() / n;
+    let in_branch = |parent: &[Option<usize>], top: usize| -> Vec<usize> {
+        let mut members = vec![top];
+        let mut i = 0;
+        while i < members.len() {
+            let at = members[i];
+            members.extend((0..n).filter(|&c| keep[c] && parent[c] == Some(at)));
+            i += 1;
+        }
+        members
+    };
+    // How far `limb` strays from its mean position in the frame of `candidate`.
+    let drift = |limb: usize, candidate: usize| {
+        let local = |f: usize| relative(globals[f * n + candidate], globals[f * n + limb]).translation;
+        let mean = (0..frames).map(local).sum::<Vec3>() / frames as f32;
+        (0..frames).map(|f| local(f).distance(mean)).fold(0.0f32, f32::max)
+    };
+    let branches: Vec<Vec<usize>> = kids.iter().map(|&k| in_branch(parent, k)).collect();
+    let body = (0..kids.len()).max_by_key(|&b| branches[b].len()).expect("at least two children");
+    let limit = (branches[body].len() as f32 * fraction).max(1.0);
+    for (b, branch) in branches.iter().enumerate() {
+        if b == body || branch.len() as f32 > limit {
+            continue;
+        }
+        let limb = kids[b];
+        let (best, best_drift) = branches[body]
+            .iter()
+            .map(|&c| (c, drift(limb, c)))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .expect("the body branch has its top joint");
+        if best_drift < drift(limb, root) {
+            parent[limb] = Some(best);
+        }
     }
 }
 
@@ -250,10 +313,11 @@ fn is_static(motion: &Motion, joint: usize, tolerance: f32) -> bool {
 }
 
 fn compose(a: Transform, b: Transform) -> Transform {
-    Transform { rotation: a.rotation * b.rotation, translation: a.apply(b.translation) }
+    Transform { rotation: (a.rotation * b.rotation).normalize(), translation: a.apply(b.translation) }
 }
 
-fn invert(t: Transform) -> Transform {
-    let rotation = t.rotation.inverse();
-    Transform { rotation, translation: -(rotation * t.translation) }
+/// `b` expressed in the frame of `a`.
+fn relative(a: Transform, b: Transform) -> Transform {
+    let inverse = a.rotation.inverse();
+    Transform { rotation: (inverse * b.rotation).normalize(), translation: inverse * (b.translation - a.translation) }
 }
