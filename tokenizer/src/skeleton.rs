@@ -271,12 +271,21 @@ pub enum SkeletonError {
     /// An offset or end site with a NaN or infinite component.
     #[error("joint {0:?} has a non-finite offset")]
     NonFinite(String),
+    /// Joints not listed depth-first (every joint's subtree right after it, as BVH lists them).
+    #[error("joint {index} ({name:?}) breaks depth-first order: its parent's subtree ended before it")]
+    NotDepthFirst {
+        /// Offending joint index.
+        index: usize,
+        /// Offending joint name.
+        name: String,
+    },
 }
 
-/// A skeleton: joints in parent-before-child order, rooted at joint 0.
+/// A skeleton: joints in depth-first order (each joint followed by its whole subtree, the order
+/// a BVH file lists them in), rooted at joint 0.
 ///
-/// The rest pose is the offsets with zero rotation. The invariants (one root at index 0, parents
-/// before children, unique names, finite offsets) hold for every value of this type.
+/// The rest pose is the offsets with zero rotation. The invariants (one root at index 0,
+/// depth-first order, unique names, finite offsets) hold for every value of this type.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Skeleton {
     joints: Vec<Joint>,
@@ -289,6 +298,8 @@ impl Skeleton {
             return Err(SkeletonError::Empty);
         }
         let mut names = std::collections::HashSet::with_capacity(joints.len());
+        // The chain from the root to the previous joint: a joint's parent must be on it.
+        let mut chain: Vec<usize> = Vec::new();
         for (index, joint) in joints.iter().enumerate() {
             match (index, joint.parent) {
                 (0, None) => {}
@@ -300,6 +311,15 @@ impl Skeleton {
                 }
                 _ => {}
             }
+            if let Some(parent) = joint.parent {
+                while chain.last().is_some_and(|&c| c != parent) {
+                    chain.pop();
+                }
+                if chain.is_empty() {
+                    return Err(SkeletonError::NotDepthFirst { index, name: joint.name.clone() });
+                }
+            }
+            chain.push(index);
             if !names.insert(joint.name.as_str()) {
                 return Err(SkeletonError::DuplicateName(joint.name.clone()));
             }
@@ -443,6 +463,15 @@ mod tests {
         assert!(matches!(Skeleton::new(two_roots), Err(SkeletonError::Root { index: 1, .. })));
         let dup = vec![joint("a", None, Vec3::ZERO), joint("a", Some(0), Vec3::ZERO)];
         assert_eq!(Skeleton::new(dup), Err(SkeletonError::DuplicateName("a".into())));
+        // b's subtree (b, c) ends when d, a child of the root, starts; e cannot join it again.
+        let interleaved = vec![
+            joint("a", None, Vec3::ZERO),
+            joint("b", Some(0), Vec3::ZERO),
+            joint("c", Some(1), Vec3::ZERO),
+            joint("d", Some(0), Vec3::ZERO),
+            joint("e", Some(1), Vec3::ZERO),
+        ];
+        assert!(matches!(Skeleton::new(interleaved), Err(SkeletonError::NotDepthFirst { index: 4, .. })));
     }
 
     #[test]
