@@ -5,34 +5,20 @@
 //! last frame). Set `ANYMO_BLENDER_REFS` to a folder made the same way to check more clips
 //! (the README's figure covers every clip of the corpus).
 
-use anymo_tests::data_dir;
+use anymo_tests::{data_dir, reference_files};
 use anymo_tokenizer::bvh::{self, ReadOptions};
 use anymo_tokenizer::kinematics::joint_positions;
 use anymo_tokenizer::motion::Motion;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
 
 /// The largest tolerated distance, as a fraction of the skeleton's diameter. Blender stores
 /// positions in f32 and the references are rounded to 5 decimals.
 const TOLERANCE: f32 = 2e-5;
 
-fn reference_dir() -> PathBuf {
-    match std::env::var_os("ANYMO_BLENDER_REFS") {
-        Some(dir) => PathBuf::from(dir),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/blender_fk"),
-    }
-}
-
 #[test]
 fn fk_matches_blenders_importer() {
     let Some(data) = data_dir() else { return };
-    let mut refs: Vec<PathBuf> = std::fs::read_dir(reference_dir())
-        .expect("reference folder")
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    refs.sort();
-    assert!(!refs.is_empty(), "no Blender references in {}", reference_dir().display());
+    let refs = reference_files("ANYMO_BLENDER_REFS", "blender_fk");
     let mut worst = (0.0f32, String::new());
     for reference in &refs {
         let stem = reference.file_stem().and_then(|s| s.to_str()).expect("utf-8 name");

@@ -5,12 +5,11 @@
 //! back to glTF's Y-up axes): `tests/fixtures/blender_gltf` holds a few files; set
 //! `ANYMO_BLENDER_GLTF_REFS` to a folder made for every GLB of the corpus.
 
-use anymo_tests::data_dir;
+use anymo_tests::{data_dir, reference_files};
 use anymo_tokenizer::gltf::GltfAsset;
 use anymo_tokenizer::kinematics::joint_positions;
 use anymo_tokenizer::skeleton::EulerOrder;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
 
 /// Blender 3.4's importer departs from the glTF rules on some rigs (it turns the Triceratops
 /// on its side, and moves IK-driven bones of some animals by about 1% of their size), so the
@@ -22,23 +21,10 @@ const CLOSE: f32 = 1e-2;
 /// See [`SHARE_CLOSE`].
 const MEDIAN: f32 = 1e-4;
 
-fn reference_dir() -> PathBuf {
-    match std::env::var_os("ANYMO_BLENDER_GLTF_REFS") {
-        Some(dir) => PathBuf::from(dir),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/blender_gltf"),
-    }
-}
-
 #[test]
 fn gltf_import_matches_blenders_importer() {
     let Some(data) = data_dir() else { return };
-    let mut refs: Vec<PathBuf> = std::fs::read_dir(reference_dir())
-        .expect("reference folder")
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    refs.sort();
-    assert!(!refs.is_empty(), "no references in {}", reference_dir().display());
+    let refs = reference_files("ANYMO_BLENDER_GLTF_REFS", "blender_gltf");
     let (mut worst, mut compared, mut animations) = ((0.0f32, String::new()), 0usize, 0usize);
     let mut errors: Vec<f32> = Vec::new();
     for reference in &refs {

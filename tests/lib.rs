@@ -44,3 +44,20 @@ pub fn scratch_dir(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("scratch dir");
     dir
 }
+
+/// The JSON reference files of a check: those in the folder named by the environment variable
+/// `env` when it is set, else the committed ones in `tests/fixtures/<fixture>`; sorted.
+pub fn reference_files(env: &str, fixture: &str) -> Vec<PathBuf> {
+    let dir = match std::env::var_os(env) {
+        Some(dir) => PathBuf::from(dir),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(fixture),
+    };
+    let mut refs: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("reference folder {}: {e}", dir.display()))
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    refs.sort();
+    assert!(!refs.is_empty(), "no references in {}", dir.display());
+    refs
+}
