@@ -83,3 +83,37 @@ fn gzip_is_recognised_by_content_and_a_corrupt_stream_is_an_io_error() {
     assert!(matches!(err, bvh::BvhError::Io(_)) || err.syntax().is_some(), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Inputs the fuzzer found, each pinned to the error it must now give.
+const FUZZ_REGRESSIONS: &[(&str, &str)] = &[(
+    // No channels and `Frames: 050000000` with no rows: once read as 50 million empty frames
+    // (a timeout, then gigabytes in `Motion::from_bvh`); the rows must now back the claim.
+    "zero_channels_fifty_million_frames.bvh",
+    "line 8, column 1: the file ends after 0 of the 50000000 frames that Frames: declares",
+)];
+
+#[test]
+fn fuzz_regressions_give_their_errors() {
+    let folder = here("fuzz_regressions");
+    let mut on_disk: Vec<String> =
+        std::fs::read_dir(&folder).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    on_disk.sort();
+    let mut listed: Vec<String> = FUZZ_REGRESSIONS.iter().map(|(f, _)| f.to_string()).collect();
+    listed.sort();
+    assert_eq!(on_disk, listed, "every fuzz regression has an expected outcome");
+    for (file, message) in FUZZ_REGRESSIONS {
+        let err = bvh::read_path(folder.join(file), ReadOptions::default()).expect_err(file);
+        assert_eq!(err.to_string(), *message, "{file}");
+    }
+}
+
+#[test]
+fn a_skeleton_without_channels_counts_its_empty_rows() {
+    let text = "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n}\nMOTION\nFrames: 2\nFrame Time: 0.5\n\n\n\n";
+    assert_eq!(bvh::parse_str(text).unwrap().frames(), 2);
+    let short = "HIERARCHY\nROOT A\n{\n OFFSET 0 0 0\n}\nMOTION\nFrames: 3\nFrame Time: 0.5\n\n";
+    assert!(matches!(
+        bvh::parse_str(short).unwrap_err().syntax(),
+        Some(SyntaxError::MissingFrames { declared: 3, found: 1 })
+    ));
+}

@@ -427,6 +427,11 @@ impl FrameScanner {
             }
             let found = self.values.len() - before;
             if found == 0 {
+                // A skeleton without channels has empty frame rows; count them, so that a
+                // claim of millions of frames needs the rows to back it.
+                if self.channels == 0 && self.frames < self.declared {
+                    self.frames += 1;
+                }
                 continue;
             }
             if self.frames == self.declared {
@@ -456,9 +461,6 @@ impl FrameScanner {
 
     /// Checks the row count against `Frames:` and returns it.
     fn finish(&self) -> Result<usize, BvhError> {
-        if self.channels == 0 {
-            return Ok(self.declared);
-        }
         if self.frames < self.declared {
             return Err(self.error(1, SyntaxError::MissingFrames { declared: self.declared, found: self.frames }));
         }
