@@ -67,7 +67,14 @@ fn write_tree(skeleton: &Skeleton, out: &mut String) -> std::fmt::Result {
         let channels: Vec<String> = joint.channels.as_slice().iter().map(|c| c.to_string()).collect();
         let helper = if labels[j].helper { " (helper)" } else { "" };
         let bone = if j == 0 { "root".to_string() } else { format!("{:.4}", joint.offset.length()) };
-        writeln!(out, "  {}{}  [{}]  {bone}  {}{helper}", "  ".repeat(depths[j]), joint.name, channels.join(" "), labels[j])?;
+        writeln!(
+            out,
+            "  {}{}  [{}]  {bone}  {}{helper}",
+            "  ".repeat(depths[j]),
+            joint.name,
+            channels.join(" "),
+            labels[j]
+        )?;
     }
     Ok(())
 }
