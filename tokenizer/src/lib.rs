@@ -18,6 +18,7 @@
 //! ```
 
 pub mod bvh;
+pub mod dataset;
 pub mod features;
 pub mod gltf;
 pub mod kinematics;

@@ -1,7 +1,10 @@
 //! The subcommands of `anymo`, one module each.
 
+mod context;
 mod convert;
+mod corpus;
 mod fk;
+mod ingest;
 mod input;
 mod inspect;
 
@@ -24,6 +27,10 @@ enum Command {
     Convert(convert::Args),
     /// Print the global joint positions of one frame as JSON.
     Fk(fk::Args),
+    /// Add a folder of BVH/GLB files or a manifest TSV to the corpus store.
+    Ingest(ingest::Args),
+    /// Show what the corpus store holds, or export a clip.
+    Corpus(corpus::Args),
 }
 
 impl Cli {
@@ -33,6 +40,8 @@ impl Cli {
             Command::Inspect(args) => inspect::run(args),
             Command::Convert(args) => convert::run(args),
             Command::Fk(args) => fk::run(args),
+            Command::Ingest(args) => ingest::run(args),
+            Command::Corpus(args) => corpus::run(args),
         }
     }
 }

@@ -1,0 +1,5 @@
+//! anymo's services: the corpus store and ingestion (and, later, the REST and gRPC server).
+//! The `anymo` binary is a thin command line over this library.
+
+pub mod ingest;
+pub mod store;

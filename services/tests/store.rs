@@ -1,0 +1,119 @@
+//! The corpus store and ingest, against SQLite always and PostgreSQL when one is reachable at
+//! 127.0.0.1:5432 (set ANYMO_TEST_POSTGRES to another URL of a database the test may create
+//! databases from): idempotent ingest, exact export, matching migrations on both databases.
+
+use anymo_services::ingest::{Item, Progress, ingest, items_from_manifest};
+use anymo_services::store::Store;
+use anymo_tests::{data_dir, scratch_dir};
+use anymo_tokenizer::text::{CachedEncoder, MODEL_DIR_NAME, SentenceEncoder};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+struct Quiet;
+impl Progress for Quiet {
+    fn clip_done(&self) {}
+}
+
+fn encoder() -> Option<CachedEncoder> {
+    let models = std::env::var_os("ANYMO_MODELS")
+        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models"), PathBuf::from);
+    match SentenceEncoder::load(models.join(MODEL_DIR_NAME)) {
+        Ok(e) => Some(CachedEncoder::new(e)),
+        Err(e) => {
+            eprintln!("skipping: {e}");
+            None
+        }
+    }
+}
+
+/// A sample of the corpus: every 40th manifest row, so every source appears.
+fn sample() -> Option<Vec<Item>> {
+    let dir = data_dir()?;
+    Some(items_from_manifest(&dir.join("manifest.tsv")).unwrap().into_iter().step_by(40).collect())
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap()
+}
+
+/// The contract every backend must keep.
+async fn contract(store: &Store, encoder: &mut CachedEncoder, items: &[Item]) {
+    let first = ingest(store, encoder, "sample", items, 2, &Quiet).await.unwrap();
+    assert!(first.added > 30, "{first:?}");
+    assert_eq!(first.added + first.skipped + first.rejected_count(), items.len());
+    let dump = store.canonical_dump().await.unwrap();
+    assert_eq!(dump.len(), first.added);
+
+    // Running again adds nothing and changes nothing.
+    let second = ingest(store, encoder, "sample again", items, 2, &Quiet).await.unwrap();
+    assert_eq!((second.added, second.skipped), (0, first.added));
+    assert_eq!(store.canonical_dump().await.unwrap(), dump);
+
+    // Counts agree, and each clip exports exactly the bytes it was ingested from.
+    let stats = store.stats().await.unwrap();
+    assert_eq!(stats.clips as usize, first.added);
+    let split_total: i64 = stats.groups.iter().filter(|g| g.0 == "split").map(|g| g.2).sum();
+    assert_eq!(split_total, stats.clips);
+    let skeletons = store.skeletons().await.unwrap();
+    assert_eq!(skeletons.iter().map(|s| s.clips).sum::<i64>(), stats.clips);
+    assert!(skeletons.iter().all(|s| s.labels.len() as i64 == s.joint_count));
+    for id in 1..=3 {
+        let clip = store.clip(id).await.unwrap().expect("stored clip");
+        let item = items.iter().find(|i| i.key == clip.source_path).expect("an ingested item");
+        assert_eq!(clip.captions, item.captions);
+        let mut original = Vec::new();
+        flate2::read::MultiGzDecoder::new(std::fs::File::open(&item.file).unwrap()).read_to_end(&mut original).unwrap();
+        assert!(store.clip_bvh(id).await.unwrap().unwrap() == original, "clip {id} exports its original bytes");
+    }
+    assert!(store.clip(1_000_000).await.unwrap().is_none());
+}
+
+#[test]
+fn sqlite_store_keeps_the_contract() {
+    let (Some(items), Some(mut encoder)) = (sample(), encoder()) else { return };
+    let dir = scratch_dir("store-sqlite");
+    runtime().block_on(async {
+        let store = Store::open(&Store::default_url(&dir)).await.unwrap();
+        contract(&store, &mut encoder, &items).await;
+    });
+}
+
+#[test]
+fn postgres_store_keeps_the_contract() {
+    let (Some(items), Some(mut encoder)) = (sample(), encoder()) else { return };
+    let admin =
+        std::env::var("ANYMO_TEST_POSTGRES").unwrap_or_else(|_| "postgres://postgres@127.0.0.1:5432/test".into());
+    runtime().block_on(async {
+        sqlx::any::install_default_drivers();
+        let Ok(pool) = sqlx::AnyPool::connect(&admin).await else {
+            eprintln!("skipping: no PostgreSQL at {admin} (set ANYMO_TEST_POSTGRES)");
+            return;
+        };
+        // A fresh database per run, dropped afterwards.
+        let name = format!("anymo_test_{}", std::process::id());
+        sqlx::query(sqlx::AssertSqlSafe(format!("DROP DATABASE IF EXISTS {name}"))).execute(&pool).await.unwrap();
+        sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}"))).execute(&pool).await.unwrap();
+        let url = format!("{}/{name}", admin.rsplit_once('/').unwrap().0);
+        {
+            let store = Store::open(&url).await.unwrap();
+            contract(&store, &mut encoder, &items).await;
+            // A second replica on the same database sees the same corpus.
+            let replica = Store::open(&url).await.unwrap();
+            assert_eq!(replica.canonical_dump().await.unwrap(), store.canonical_dump().await.unwrap());
+        }
+        sqlx::query(sqlx::AssertSqlSafe(format!("DROP DATABASE {name} WITH (FORCE)"))).execute(&pool).await.unwrap();
+    });
+}
+
+#[test]
+fn migrations_match_on_both_databases() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../migrations");
+    let versions = |db: &str| {
+        let mut v: Vec<String> =
+            std::fs::read_dir(root.join(db)).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+        v.sort();
+        v
+    };
+    assert_eq!(versions("sqlite"), versions("postgres"));
+    assert!(!versions("sqlite").is_empty());
+}

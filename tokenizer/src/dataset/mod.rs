@@ -1,0 +1,5 @@
+//! Datasets for training and evaluation: the splits of EVAL.md and the window loader.
+
+pub mod split;
+
+pub use split::{Split, split_of};
