@@ -299,6 +299,11 @@ pub async fn ingest(
     const CHUNK: usize = 64;
     for chunk in items.chunks(CHUNK) {
         let prepared = prepare_all(chunk, threads.max(1));
+        // One batch through the encoder for the chunk's captions: the per-clip lookups below
+        // then hit the cache (batches of one or two sentences waste the matrix kernels).
+        let texts: Vec<&str> =
+            prepared.iter().flatten().flat_map(|p| p.item.captions.iter().map(String::as_str)).collect();
+        encoder.encode(&texts)?;
         for (item, result) in chunk.iter().zip(prepared) {
             let p = match result {
                 Ok(p) => p,
