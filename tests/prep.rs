@@ -150,3 +150,24 @@ fn bone_scaling_scales_the_body_not_the_path() {
         }
     }
 }
+
+#[test]
+fn the_loader_batches_real_clips_into_finite_tensors() {
+    use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
+    let Some(files) = corpus_sample(97) else { return };
+    let clips: Vec<Motion> =
+        files.iter().filter_map(|p| clean(&load(p), &CleanOptions::default()).ok()).map(|c| c.motion).collect();
+    let mut loader =
+        WindowLoader::new(clips, LoaderConfig { window: 32, batch_size: 4, seed: 1, ..LoaderConfig::default() });
+    let batches = loader.epoch().unwrap();
+    assert!(batches.len() >= loader.groups());
+    for b in &batches {
+        for t in [&b.root, &b.rotations, &b.offsets] {
+            let v: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
+            assert!(v.iter().all(|x| x.is_finite()));
+        }
+        // Canonical windows stand on the floor: root heights stay within a few diameters of it.
+        let root: Vec<f32> = b.root.flatten_all().unwrap().to_vec1().unwrap();
+        assert!(root.chunks(4).all(|r| r[3] > -0.1 && r[3] < 5.0), "root heights in diameters");
+    }
+}
