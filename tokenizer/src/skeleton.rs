@@ -271,6 +271,10 @@ pub enum SkeletonError {
     /// An offset or end site with a NaN or infinite component.
     #[error("joint {0:?} has a non-finite offset")]
     NonFinite(String),
+    /// A name a BVH file cannot hold as it is: empty, with a line break, with white space at
+    /// either end, or ending in a white-space-separated `{` (read back as an opening brace).
+    #[error("joint name {0:?} cannot be written to BVH and read back")]
+    BadName(String),
     /// Joints not listed depth-first (every joint's subtree right after it, as BVH lists them).
     #[error("joint {index} ({name:?}) breaks depth-first order: its parent's subtree ended before it")]
     NotDepthFirst {
@@ -279,6 +283,15 @@ pub enum SkeletonError {
         /// Offending joint name.
         name: String,
     },
+}
+
+/// True when a joint name survives a BVH round trip: not empty, no line break, no white space at
+/// either end, and not ending in a white-space-separated `{` (which reads as an opening brace).
+pub fn is_writable_name(name: &str) -> bool {
+    !(name.is_empty()
+        || name.contains(['\n', '\r'])
+        || name.trim() != name
+        || name.strip_suffix('{').is_some_and(|rest| rest.ends_with(char::is_whitespace)))
 }
 
 /// A skeleton: joints in depth-first order (each joint followed by its whole subtree, the order
@@ -320,6 +333,9 @@ impl Skeleton {
                 }
             }
             chain.push(index);
+            if !is_writable_name(&joint.name) {
+                return Err(SkeletonError::BadName(joint.name.clone()));
+            }
             if !names.insert(joint.name.as_str()) {
                 return Err(SkeletonError::DuplicateName(joint.name.clone()));
             }
@@ -463,6 +479,10 @@ mod tests {
         assert!(matches!(Skeleton::new(two_roots), Err(SkeletonError::Root { index: 1, .. })));
         let dup = vec![joint("a", None, Vec3::ZERO), joint("a", Some(0), Vec3::ZERO)];
         assert_eq!(Skeleton::new(dup), Err(SkeletonError::DuplicateName("a".into())));
+        for bad in ["", " a", "a\nb", "a {"] {
+            let named = vec![joint(bad, None, Vec3::ZERO)];
+            assert_eq!(Skeleton::new(named), Err(SkeletonError::BadName(bad.into())), "{bad:?}");
+        }
         // b's subtree (b, c) ends when d, a child of the root, starts; e cannot join it again.
         let interleaved = vec![
             joint("a", None, Vec3::ZERO),

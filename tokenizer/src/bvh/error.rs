@@ -103,6 +103,10 @@ pub enum SyntaxError {
         /// Where it was first used.
         first_line: usize,
     },
+    /// A joint name that could not be written back as it is (a carriage return inside it, or a
+    /// second white-space-separated `{` at its end).
+    #[error("joint name {0} cannot be written back to BVH as it is")]
+    BadJointName(Found),
     /// A second `ROOT` after the first hierarchy closed.
     #[error("a second ROOT: anymo reads files with one hierarchy")]
     SecondRoot,

@@ -3,7 +3,7 @@
 
 use super::Bvh;
 use super::error::{BvhError, Found, SyntaxError};
-use crate::skeleton::{Channel, Channels, Joint, Skeleton, SkeletonError};
+use crate::skeleton::{Channel, Channels, Joint, Skeleton, SkeletonError, is_writable_name};
 use glam::Vec3;
 use std::collections::HashMap;
 use std::fs::File;
@@ -203,12 +203,17 @@ impl HierarchyBuilder {
     fn open_joint<R: BufRead>(&mut self, lexer: &mut Lexer<'_, R>, parent: Option<usize>) -> Result<usize, BvhError> {
         let mut name = lexer.rest_of_line("a joint name")?;
         let mut brace_on_name_line = false;
-        if let Some(stripped) = name.text.strip_suffix('{') {
-            let stripped = stripped.trim_end();
-            if !stripped.is_empty() {
-                name.text = stripped.to_string();
-                brace_on_name_line = true;
-            }
+        // `Hips {`: a brace after white space on the name line opens the joint. A brace that
+        // is part of the name (`a={`) does not.
+        if let Some(stripped) = name.text.strip_suffix('{')
+            && stripped.ends_with(char::is_whitespace)
+            && !stripped.trim_end().is_empty()
+        {
+            name.text = stripped.trim_end().to_string();
+            brace_on_name_line = true;
+        }
+        if !is_writable_name(&name.text) {
+            return Err(name.error(SyntaxError::BadJointName(Found::token(&name.text))));
         }
         if let Some(&first_line) = self.first_seen.get(&name.text) {
             return Err(name.error(SyntaxError::DuplicateJoint { name: name.text.clone(), first_line }));
