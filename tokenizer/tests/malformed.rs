@@ -38,21 +38,24 @@ fn here(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests").join(name)
 }
 
+/// Every file in `tests/<folder>` is listed in `expected`, and each gives exactly its error.
+fn check_folder(folder: &str, expected: &[(&str, &str)]) {
+    let dir = here(folder);
+    let mut on_disk: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    on_disk.sort();
+    let mut listed: Vec<String> = expected.iter().map(|(f, _)| f.to_string()).collect();
+    listed.sort();
+    assert_eq!(on_disk, listed, "every file in tests/{folder} has an expected error, and only those");
+    for (file, message) in expected {
+        let err = bvh::read_path(dir.join(file), ReadOptions::default()).expect_err(file);
+        assert_eq!(err.to_string(), *message, "{file}");
+    }
+}
+
 #[test]
 fn each_malformed_file_gives_its_own_error() {
-    let folder = here("malformed");
-    let mut on_disk: Vec<String> =
-        std::fs::read_dir(&folder).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
-    on_disk.sort();
-    let mut listed: Vec<String> = EXPECTED.iter().map(|(f, _)| f.to_string()).collect();
-    listed.sort();
-    assert_eq!(on_disk, listed, "every file in tests/malformed has an expected error, and only those");
-    for (file, message) in EXPECTED {
-        match bvh::read_path(folder.join(file), ReadOptions::default()) {
-            Ok(_) => panic!("{file}: read without error"),
-            Err(e) => assert_eq!(e.to_string(), *message, "{file}"),
-        }
-    }
+    check_folder("malformed", EXPECTED);
 }
 
 #[test]
@@ -104,17 +107,7 @@ const FUZZ_REGRESSIONS: &[(&str, &str)] = &[
 
 #[test]
 fn fuzz_regressions_give_their_errors() {
-    let folder = here("fuzz_regressions");
-    let mut on_disk: Vec<String> =
-        std::fs::read_dir(&folder).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
-    on_disk.sort();
-    let mut listed: Vec<String> = FUZZ_REGRESSIONS.iter().map(|(f, _)| f.to_string()).collect();
-    listed.sort();
-    assert_eq!(on_disk, listed, "every fuzz regression has an expected outcome");
-    for (file, message) in FUZZ_REGRESSIONS {
-        let err = bvh::read_path(folder.join(file), ReadOptions::default()).expect_err(file);
-        assert_eq!(err.to_string(), *message, "{file}");
-    }
+    check_folder("fuzz_regressions", FUZZ_REGRESSIONS);
 }
 
 #[test]
