@@ -171,3 +171,27 @@ fn the_loader_batches_real_clips_into_finite_tensors() {
         assert!(root.chunks(4).all(|r| r[3] > -0.1 && r[3] < 5.0), "root heights in diameters");
     }
 }
+
+#[test]
+fn a_walk_has_feet_that_touch_down_and_lift() {
+    use anymo_tokenizer::features::{foot_contacts, foot_joints, local_positions};
+    use anymo_tokenizer::prep::labels::label_name;
+    let Some(dir) = data_dir() else { return };
+    let walk = dir.join("bandai/dataset-1/dataset-1_walk_active_001.bvh.gz");
+    let motion = canonicalise(&clean(&load(&walk), &CleanOptions::default()).unwrap().motion);
+    let feet = foot_joints(&motion, 0.05);
+    let names: Vec<String> = feet.iter().map(|&j| label_name(&motion.skeleton().joint(j).name).text()).collect();
+    assert_eq!(feet.len(), 2, "{names:?}");
+    assert!(names.iter().all(|n| n.contains("toe") || n.contains("foot")), "{names:?}");
+    // In contact: within 3% of the diameter of the floor and slower than 0.5% of it per frame.
+    let contacts = foot_contacts(&motion, &feet, 0.03, 0.005);
+    for (k, name) in names.iter().enumerate() {
+        let down = contacts.iter().skip(k).step_by(feet.len()).filter(|&&c| c == 1.0).count();
+        let frames = motion.frames();
+        assert!(down > frames / 10 && down < frames * 9 / 10, "{name}: in contact {down} of {frames} frames");
+    }
+    // Root-relative positions: the root sits at the origin of every frame.
+    let local = local_positions(&motion);
+    let n = motion.skeleton().len();
+    assert!((0..motion.frames()).all(|f| local[f * n].length() < 1e-6));
+}

@@ -29,7 +29,7 @@ pub enum StoreError {
 
 /// Which database is behind the store.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Backend {
+enum Backend {
     /// An embedded SQLite file.
     Sqlite,
     /// A PostgreSQL server, shareable by several replicas.
@@ -40,7 +40,6 @@ pub enum Backend {
 #[derive(Clone)]
 pub struct Store {
     pool: AnyPool,
-    backend: Backend,
 }
 
 /// A skeleton to store alongside its first clip.
@@ -148,14 +147,6 @@ pub fn to_blob(values: &[f32]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
-/// An f32 array from little-endian bytes.
-pub fn from_blob(bytes: &[u8]) -> Result<Vec<f32>, StoreError> {
-    if !bytes.len().is_multiple_of(4) {
-        return Err(StoreError::Corrupt(format!("an f32 blob of {} bytes", bytes.len())));
-    }
-    Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect())
-}
-
 impl Store {
     /// The default store: a SQLite file in the data directory.
     pub fn default_url(data_dir: &Path) -> String {
@@ -200,12 +191,7 @@ impl Store {
             Backend::Sqlite => SQLITE_MIGRATIONS.run(&pool).await?,
             Backend::Postgres => POSTGRES_MIGRATIONS.run(&pool).await?,
         }
-        Ok(Store { pool, backend })
-    }
-
-    /// The database behind the store.
-    pub fn backend(&self) -> Backend {
-        self.backend
+        Ok(Store { pool })
     }
 
     /// Records the start of an ingest run; runs left `running` by a killed process are marked

@@ -147,13 +147,22 @@ pub fn foot_contacts(motion: &Motion, feet: &[usize], height: f32, speed: f32) -
     out
 }
 
-/// The skeleton's feet: leaf joints whose rest-pose height is within `band` (a fraction of the
-/// diameter) of the lowest joint. Rest poses stand on the ground for humans and animals alike.
-pub fn foot_joints(skeleton: &Skeleton, band: f32) -> Vec<usize> {
-    let rest = skeleton.rest_positions();
-    let lowest = rest.iter().map(|p| p.y).fold(f32::INFINITY, f32::min);
+/// The feet of a motion: leaf joints whose mean height over the clip is within `band` (a
+/// fraction of the diameter) of the lowest leaf's. Taken from the motion, not the rest pose,
+/// since rest poses are not always standing (Bandai's lies on its side).
+pub fn foot_joints(motion: &Motion, band: f32) -> Vec<usize> {
+    let skeleton = motion.skeleton();
+    let n = skeleton.len();
+    if motion.frames() == 0 {
+        return Vec::new();
+    }
+    let positions = all_joint_positions(motion);
+    let mean_height =
+        |j: usize| (0..motion.frames()).map(|f| positions[f * n + j].y).sum::<f32>() / motion.frames() as f32;
+    let leaves: Vec<(usize, f32)> = (0..n).filter(|&j| skeleton.is_leaf(j)).map(|j| (j, mean_height(j))).collect();
+    let lowest = leaves.iter().map(|l| l.1).fold(f32::INFINITY, f32::min);
     let tolerance = band * skeleton.diameter();
-    (0..skeleton.len()).filter(|&j| skeleton.is_leaf(j) && rest[j].y <= lowest + tolerance).collect()
+    leaves.into_iter().filter(|l| l.1 <= lowest + tolerance).map(|l| l.0).collect()
 }
 
 /// Moves and turns a motion so it starts at the origin on the floor, facing +Z, Y up (the input

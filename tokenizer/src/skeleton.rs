@@ -392,19 +392,6 @@ impl Skeleton {
         self.joints.iter().map(|j| j.channels.len()).sum()
     }
 
-    /// Where each joint's values start within a frame.
-    pub fn channel_starts(&self) -> Vec<usize> {
-        let mut start = 0;
-        self.joints
-            .iter()
-            .map(|j| {
-                let s = start;
-                start += j.channels.len();
-                s
-            })
-            .collect()
-    }
-
     /// Each joint's depth in the tree (the root is 0).
     pub fn depths(&self) -> Vec<usize> {
         let mut depth = vec![0; self.len()];
@@ -438,11 +425,6 @@ impl Skeleton {
             longest = longest.max(tip);
         }
         longest
-    }
-
-    /// Consumes the skeleton and returns its joints.
-    pub fn into_joints(self) -> Vec<Joint> {
-        self.joints
     }
 }
 
