@@ -78,6 +78,11 @@ impl WindowLoader {
         self.groups.len()
     }
 
+    /// The skeleton shared by the clips of a group (rest offsets of its first clip).
+    pub fn group_skeleton(&self, group: usize) -> &crate::skeleton::Skeleton {
+        self.clips[self.groups[group][0]].skeleton()
+    }
+
     /// One epoch: every clip gives one window per `window` frames of its length (at least one),
     /// at random starts; windows are shuffled within their group and batched; batches of all
     /// groups are shuffled.

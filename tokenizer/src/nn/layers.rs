@@ -1,0 +1,143 @@
+//! Layers with a backward pass for every parameter, shaped for few large matmuls.
+
+use super::params::Params;
+use candle_core::{D, Result, Tensor};
+
+/// `y = x W + b` over the last dimension. Inputs of any rank are flattened to one 2-D matmul.
+#[derive(Clone)]
+pub struct Linear {
+    weight: Tensor,
+    bias: Option<Tensor>,
+    out: usize,
+}
+
+impl Linear {
+    /// A layer from `input` to `output` features, weights ~ N(0, 1/input).
+    pub fn new(params: &mut Params, name: &str, input: usize, output: usize) -> Result<Linear> {
+        Self::with_bias(params, name, input, output, true)
+    }
+
+    /// A layer with or without a bias.
+    pub fn with_bias(params: &mut Params, name: &str, input: usize, output: usize, bias: bool) -> Result<Linear> {
+        params.scope(name, |p| {
+            let weight = p.normal("w", &[input, output], (1.0 / input as f32).sqrt())?;
+            let bias = if bias { Some(p.constant("b", &[output], 0.0)?) } else { None };
+            Ok(Linear { weight, bias, out: output })
+        })
+    }
+
+    /// Applies the layer to the last dimension of `x`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let mut dims = x.dims().to_vec();
+        let input = *dims.last().expect("at least one dimension");
+        let rows = x.elem_count() / input;
+        let y = x.reshape((rows, input))?.matmul(&self.weight)?;
+        let y = match &self.bias {
+            Some(b) => y.broadcast_add(b)?,
+            None => y,
+        };
+        *dims.last_mut().expect("at least one dimension") = self.out;
+        y.reshape(dims)
+    }
+}
+
+/// Layer normalisation over the last dimension (candle's fused one has no backward pass).
+#[derive(Clone)]
+pub struct LayerNorm {
+    gain: Tensor,
+    bias: Tensor,
+}
+
+impl LayerNorm {
+    /// A layer norm over `dim` features, starting as the identity normalisation.
+    pub fn new(params: &mut Params, name: &str, dim: usize) -> Result<LayerNorm> {
+        params.scope(name, |p| Ok(LayerNorm { gain: p.constant("g", &[dim], 1.0)?, bias: p.constant("b", &[dim], 0.0)? }))
+    }
+
+    /// Normalises the last dimension.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        candle_nn::ops::layer_norm_slow(x, &self.gain, &self.bias, 1e-5)
+    }
+}
+
+/// Two linear layers with a GELU between them.
+#[derive(Clone)]
+pub struct FeedForward {
+    up: Linear,
+    down: Linear,
+}
+
+impl FeedForward {
+    /// `dim -> hidden -> output`.
+    pub fn new(params: &mut Params, name: &str, dim: usize, hidden: usize, output: usize) -> Result<FeedForward> {
+        params.scope(name, |p| {
+            Ok(FeedForward { up: Linear::new(p, "up", dim, hidden)?, down: Linear::new(p, "down", hidden, output)? })
+        })
+    }
+
+    /// Applies both layers.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.down.forward(&self.up.forward(x)?.gelu()?)
+    }
+}
+
+/// Multi-head self-attention over sequences `(N, L, dim)`.
+#[derive(Clone)]
+pub struct Attention {
+    qkv: Linear,
+    out: Linear,
+    heads: usize,
+}
+
+impl Attention {
+    /// Attention with `heads` heads of `dim / heads` features.
+    pub fn new(params: &mut Params, name: &str, dim: usize, heads: usize) -> Result<Attention> {
+        assert_eq!(dim % heads, 0, "{dim} features do not split into {heads} heads");
+        params.scope(name, |p| {
+            Ok(Attention { qkv: Linear::new(p, "qkv", dim, 3 * dim)?, out: Linear::new(p, "out", dim, dim)?, heads })
+        })
+    }
+
+    /// Every position attends to every position of its own sequence.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let (n, l, dim) = x.dims3()?;
+        let head = dim / self.heads;
+        let qkv = self.qkv.forward(x)?.reshape((n, l, 3, self.heads, head))?.permute((2, 0, 3, 1, 4))?;
+        let q = qkv.get(0)?.contiguous()?.reshape((n * self.heads, l, head))?;
+        let k = qkv.get(1)?.contiguous()?.reshape((n * self.heads, l, head))?;
+        let v = qkv.get(2)?.contiguous()?.reshape((n * self.heads, l, head))?;
+        let scores = (q.matmul(&k.t()?)? * (1.0 / (head as f64).sqrt()))?;
+        let weights = candle_nn::ops::softmax(&scores, D::Minus1)?;
+        let mixed = weights.matmul(&v)?.reshape((n, self.heads, l, head))?.transpose(1, 2)?.reshape((n, l, dim))?;
+        self.out.forward(&mixed)
+    }
+}
+
+/// A pre-norm transformer encoder layer: `x + attn(LN x)`, then `x + ff(LN x)`.
+#[derive(Clone)]
+pub struct TransformerLayer {
+    norm1: LayerNorm,
+    attention: Attention,
+    norm2: LayerNorm,
+    ff: FeedForward,
+}
+
+impl TransformerLayer {
+    /// A layer of width `dim` with `heads` heads and a feed-forward of `hidden` features.
+    pub fn new(params: &mut Params, name: &str, dim: usize, heads: usize, hidden: usize) -> Result<TransformerLayer> {
+        params.scope(name, |p| {
+            Ok(TransformerLayer {
+                norm1: LayerNorm::new(p, "norm1", dim)?,
+                attention: Attention::new(p, "attn", dim, heads)?,
+                norm2: LayerNorm::new(p, "norm2", dim)?,
+                ff: FeedForward::new(p, "ff", dim, hidden, dim)?,
+            })
+        })
+    }
+
+    /// Applies the layer to `(N, L, dim)`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let x = (x + self.attention.forward(&self.norm1.forward(x)?)?)?;
+        &x + self.ff.forward(&self.norm2.forward(&x)?)?
+    }
+}

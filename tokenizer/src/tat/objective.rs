@@ -1,0 +1,226 @@
+//! What the tokenizers are trained and measured on: a loader batch turned into model inputs and
+//! targets, and the reconstruction losses (features, FK positions, velocities, contacts, foot
+//! skating) shared by TAT and the zero-padded baseline.
+
+use super::fk::Levels;
+use crate::dataset::Batch;
+use candle_core::{D, Device, Result, Tensor};
+use serde::{Deserialize, Serialize};
+
+/// Mean and spread of the root features (yaw rate, heading-frame velocity, height), measured on
+/// the training data and kept with the model.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct RootStats {
+    /// Means.
+    pub mean: [f32; 4],
+    /// Standard deviations.
+    pub std: [f32; 4],
+}
+
+impl RootStats {
+    /// Measures the statistics of `(frames x 4)` root features.
+    pub fn measure(root: &[f32]) -> RootStats {
+        let n = (root.len() / 4).max(1) as f64;
+        let mut mean = [0f64; 4];
+        let mut sq = [0f64; 4];
+        for row in root.chunks_exact(4) {
+            for k in 0..4 {
+                mean[k] += row[k] as f64 / n;
+                sq[k] += (row[k] as f64).powi(2) / n;
+            }
+        }
+        let std = std::array::from_fn(|k| ((sq[k] - mean[k] * mean[k]).max(0.0).sqrt() as f32).max(1e-4));
+        RootStats { mean: mean.map(|m| m as f32), std }
+    }
+
+    fn tensors(&self) -> Result<(Tensor, Tensor)> {
+        Ok((Tensor::new(&self.mean, &Device::Cpu)?, Tensor::new(&self.std, &Device::Cpu)?))
+    }
+
+    /// `(…, 4)` raw -> normalised.
+    pub fn normalise(&self, root: &Tensor) -> Result<Tensor> {
+        let (m, s) = self.tensors()?;
+        root.broadcast_sub(&m)?.broadcast_div(&s)
+    }
+
+    /// `(…, 4)` normalised -> raw.
+    pub fn denormalise(&self, root: &Tensor) -> Result<Tensor> {
+        let (m, s) = self.tensors()?;
+        root.broadcast_mul(&s)?.broadcast_add(&m)
+    }
+}
+
+/// Contact thresholds, in diameters and diameters per frame at 30 fps.
+pub const CONTACT_HEIGHT: f32 = 0.05;
+/// See [`CONTACT_HEIGHT`].
+pub const CONTACT_SPEED: f32 = 0.01;
+
+/// A batch as model inputs and targets.
+pub struct Prepared {
+    /// `(B, T, J, INPUT_DIMS)` encoder input.
+    pub input: Tensor,
+    /// `(B, T, J, 6)` target rot6D.
+    pub rotations: Tensor,
+    /// `(B, T, 4)` normalised root features.
+    pub root: Tensor,
+    /// `(B, T, J, 3)` target positions (root at the origin of the heading frame, at its height).
+    pub positions: Tensor,
+    /// `(B, T, J)` 1 where a joint is low and still.
+    pub contacts: Tensor,
+    /// `(B, T)` real frames.
+    pub mask: Tensor,
+    /// `(B, J, 3)` rest offsets.
+    pub offsets: Tensor,
+    /// The tree by depth.
+    pub levels: Levels,
+}
+
+/// Root positions `(B, T, 3)` at the origin of the heading frame, at the given height `(B, T)`.
+pub fn root_positions(height: &Tensor) -> Result<Tensor> {
+    let zeros = height.zeros_like()?.unsqueeze(D::Minus1)?;
+    Tensor::cat(&[&zeros, &height.unsqueeze(D::Minus1)?, &zeros], D::Minus1)
+}
+
+/// Velocities along time `(B, T, ...)`, the last frame zero.
+pub fn velocities(x: &Tensor) -> Result<Tensor> {
+    let t = x.dim(1)?;
+    let diff = (x.narrow(1, 1, t - 1)? - x.narrow(1, 0, t - 1)?)?;
+    Tensor::cat(&[&diff, &x.narrow(1, 0, 1)?.zeros_like()?], 1)
+}
+
+impl Prepared {
+    /// Builds inputs and targets from a loader batch.
+    pub fn new(batch: &Batch, stats: &RootStats) -> Result<Prepared> {
+        let levels = Levels::new(&batch.parents)?;
+        let (b, t, j, _) = batch.rotations.dims4()?;
+        let height = batch.root.narrow(D::Minus1, 3, 1)?.squeeze(D::Minus1)?;
+        let positions = levels.positions(&batch.rotations, &batch.offsets, &root_positions(&height)?)?;
+        let velocity = velocities(&positions)?;
+        let root = stats.normalise(&batch.root)?;
+        let root_slot = Tensor::cat(&[&root.unsqueeze(2)?, &Tensor::zeros((b, t, j - 1, 4), root.dtype(), root.device())?], 2)?;
+        let input = Tensor::cat(&[&batch.rotations, &root_slot, &positions, &(&velocity * 10.0)?], D::Minus1)?;
+        let low = positions.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?.lt(CONTACT_HEIGHT)?;
+        let planar = Tensor::cat(&[&velocity.narrow(D::Minus1, 0, 1)?, &velocity.narrow(D::Minus1, 2, 1)?], D::Minus1)?;
+        let slow = planar.sqr()?.sum(D::Minus1)?.sqrt()?.lt(CONTACT_SPEED)?;
+        let contacts = (low.to_dtype(candle_core::DType::F32)? * slow.to_dtype(candle_core::DType::F32)?)?;
+        Ok(Prepared {
+            input,
+            rotations: batch.rotations.clone(),
+            root,
+            positions,
+            contacts,
+            mask: batch.mask.clone(),
+            offsets: batch.offsets.clone(),
+            levels,
+        })
+    }
+}
+
+/// A decoded batch.
+pub struct Prediction {
+    /// `(B, T, J, 6)`.
+    pub rotations: Tensor,
+    /// `(B, T, 4)` normalised root features.
+    pub root: Tensor,
+    /// `(B, T, J)` contact logits, when the model predicts them.
+    pub contacts: Option<Tensor>,
+}
+
+/// Loss weights.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct LossWeights {
+    /// rot6D.
+    pub rotation: f32,
+    /// Root features.
+    pub root: f32,
+    /// FK joint positions.
+    pub position: f32,
+    /// Joint velocities.
+    pub velocity: f32,
+    /// Contact classification.
+    pub contact: f32,
+    /// Foot sliding while the truth is in contact.
+    pub skating: f32,
+    /// RVQ commitment.
+    pub commitment: f32,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        LossWeights { rotation: 1.0, root: 0.5, position: 4.0, velocity: 20.0, contact: 0.1, skating: 20.0, commitment: 0.02 }
+    }
+}
+
+/// Each loss term's value, for logs.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
+pub struct LossParts {
+    /// rot6D mean squared error.
+    pub rotation: f32,
+    /// Root feature mean squared error.
+    pub root: f32,
+    /// FK position mean squared error.
+    pub position: f32,
+    /// Velocity mean squared error.
+    pub velocity: f32,
+    /// Contact cross-entropy.
+    pub contact: f32,
+    /// Foot sliding.
+    pub skating: f32,
+    /// Commitment.
+    pub commitment: f32,
+}
+
+fn masked_mean(err: &Tensor, mask: &Tensor) -> Result<Tensor> {
+    // err: (B, T, ...) ; mask: (B, T)
+    let extra: usize = err.dims()[2..].iter().product();
+    let m = mask.reshape(mask.dims().iter().copied().chain(std::iter::repeat_n(1, err.rank() - 2)).collect::<Vec<_>>())?;
+    let total = err.broadcast_mul(&m)?.sum_all()?;
+    total / (mask.sum_all()?.to_scalar::<f32>()? as f64 * extra as f64).max(1.0)
+}
+
+/// The weighted loss of a prediction, and its terms.
+pub fn loss(
+    prediction: &Prediction,
+    truth: &Prepared,
+    stats: &RootStats,
+    commitment: &Tensor,
+    w: &LossWeights,
+) -> Result<(Tensor, LossParts)> {
+    let mask = &truth.mask;
+    let rotation = masked_mean(&(&prediction.rotations - &truth.rotations)?.sqr()?, mask)?;
+    let root = masked_mean(&(&prediction.root - &truth.root)?.sqr()?, mask)?;
+    let height = stats.denormalise(&prediction.root)?.narrow(D::Minus1, 3, 1)?.squeeze(D::Minus1)?;
+    let positions = truth.levels.positions(&prediction.rotations, &truth.offsets, &root_positions(&height)?)?;
+    let position = masked_mean(&(&positions - &truth.positions)?.sqr()?, mask)?;
+    let v_pred = velocities(&positions)?;
+    let v_true = velocities(&truth.positions)?;
+    let velocity = masked_mean(&(&v_pred - &v_true)?.sqr()?, mask)?;
+    let planar = Tensor::cat(&[&v_pred.narrow(D::Minus1, 0, 1)?, &v_pred.narrow(D::Minus1, 2, 1)?], D::Minus1)?;
+    let skating = masked_mean(&(planar.sqr()?.sum(D::Minus1)? * &truth.contacts)?, mask)?;
+    let contact = match &prediction.contacts {
+        Some(logits) => {
+            // Binary cross-entropy with logits: softplus(x) - y x.
+            let softplus = (logits.abs()?.neg()?.exp()? + 1.0)?.log()?.add(&logits.relu()?)?;
+            masked_mean(&(softplus - (logits * &truth.contacts)?)?, mask)?
+        }
+        None => Tensor::new(0f32, &Device::Cpu)?,
+    };
+    let total = ((&rotation * w.rotation as f64)?
+        + (&root * w.root as f64)?
+        + (&position * w.position as f64)?
+        + (&velocity * w.velocity as f64)?
+        + (&contact * w.contact as f64)?
+        + (&skating * w.skating as f64)?
+        + (commitment * w.commitment as f64)?)?;
+    let v = |t: &Tensor| t.to_scalar::<f32>();
+    let parts = LossParts {
+        rotation: v(&rotation)?,
+        root: v(&root)?,
+        position: v(&position)?,
+        velocity: v(&velocity)?,
+        contact: v(&contact)?,
+        skating: v(&skating)?,
+        commitment: v(commitment)?,
+    };
+    Ok((total, parts))
+}
