@@ -2,4 +2,5 @@
 //! The `anymo` binary is a thin command line over this library.
 
 pub mod ingest;
+pub mod models;
 pub mod store;

@@ -3,10 +3,13 @@
 mod context;
 mod convert;
 mod corpus;
+mod eval;
 mod fk;
 mod ingest;
 mod input;
 mod inspect;
+mod tokens;
+mod train;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -31,6 +34,16 @@ enum Command {
     Ingest(ingest::Args),
     /// Show what the corpus store holds, or export a clip.
     Corpus(corpus::Args),
+    /// Train a model (OwO, the tokenizer, its baseline and ablations) on a manifest.
+    Train(train::Args),
+    /// Measure trained models by the protocol of EVAL.md.
+    Eval(eval::Args),
+    /// Turn a clip into TAT tokens (JSON).
+    Tokenize(tokens::TokenizeArgs),
+    /// Turn tokens into motion on a given skeleton (BVH).
+    Detokenize(tokens::DetokenizeArgs),
+    /// Move a clip onto another skeleton (BVH), through tokens.
+    Transfer(tokens::TransferArgs),
 }
 
 impl Cli {
@@ -42,6 +55,11 @@ impl Cli {
             Command::Fk(args) => fk::run(args),
             Command::Ingest(args) => ingest::run(args),
             Command::Corpus(args) => corpus::run(args),
+            Command::Train(args) => train::run(args),
+            Command::Eval(args) => eval::run(args),
+            Command::Tokenize(args) => tokens::run_tokenize(args),
+            Command::Detokenize(args) => tokens::run_detokenize(args),
+            Command::Transfer(args) => tokens::run_transfer(args),
         }
     }
 }

@@ -26,11 +26,22 @@ pub struct LoaderConfig {
     pub rebase: f64,
     /// Bone lengths are scaled by factors drawn from `[1 - s, 1 + s]` (0 turns it off).
     pub bone_scale: f32,
+    /// At most this many joints over all windows of a batch, so batches of large skeletons
+    /// hold fewer windows and memory stays bounded.
+    pub max_batch_joints: usize,
 }
 
 impl Default for LoaderConfig {
     fn default() -> Self {
-        LoaderConfig { window: 64, batch_size: 16, seed: 0, mirror: 0.5, rebase: 0.5, bone_scale: 0.1 }
+        LoaderConfig {
+            window: 64,
+            batch_size: 16,
+            seed: 0,
+            mirror: 0.5,
+            rebase: 0.5,
+            bone_scale: 0.1,
+            max_batch_joints: 512,
+        }
     }
 }
 
@@ -78,6 +89,11 @@ impl WindowLoader {
         self.groups.len()
     }
 
+    /// Restarts the random sequence from `seed` (a new epoch of a resumed run).
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+    }
+
     /// The skeleton shared by the clips of a group (rest offsets of its first clip).
     pub fn group_skeleton(&self, group: usize) -> &crate::skeleton::Skeleton {
         self.clips[self.groups[group][0]].skeleton()
@@ -103,7 +119,9 @@ impl WindowLoader {
                 }
             }
             shuffle(&mut windows, &mut self.rng);
-            for batch in windows.chunks(self.config.batch_size) {
+            let joints = self.clips[members[0]].skeleton().len();
+            let size = self.config.batch_size.min(self.config.max_batch_joints / joints).max(1);
+            for batch in windows.chunks(size) {
                 plans.push((g, batch.to_vec()));
             }
         }

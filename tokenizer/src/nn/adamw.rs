@@ -68,13 +68,15 @@ impl AdamW {
         let t = self.step as i32;
         let (bias1, bias2) = (1.0 - c.beta1.powi(t), 1.0 - c.beta2.powi(t));
         for (name, var, g) in present {
-            let g = (g * scale)?;
+            // Detached: a gradient's op graph reaches back into the step's forward pass, and the
+            // moments would otherwise keep every step's graph alive.
+            let g = (g.detach() * scale)?;
             let (m, v) = self.moments.get_mut(name).expect("every variable has moments");
-            *m = ((&*m * c.beta1)? + (&g * (1.0 - c.beta1))?)?;
-            *v = ((&*v * c.beta2)? + (g.sqr()? * (1.0 - c.beta2))?)?;
+            *m = ((&*m * c.beta1)? + (&g * (1.0 - c.beta1))?)?.detach();
+            *v = ((&*v * c.beta2)? + (g.sqr()? * (1.0 - c.beta2))?)?.detach();
             let update = ((&*m / bias1)? / ((&*v / bias2)?.sqrt()? + c.eps)?)?;
-            let decayed = (var.as_tensor() * (1.0 - lr * c.weight_decay))?;
-            var.set(&(decayed - (update * lr)?)?)?;
+            let decayed = (var.as_tensor().detach() * (1.0 - lr * c.weight_decay))?;
+            var.set(&(decayed - (update * lr)?)?.detach())?;
         }
         Ok(norm)
     }

@@ -19,8 +19,21 @@ impl Linear {
 
     /// A layer with or without a bias.
     pub fn with_bias(params: &mut Params, name: &str, input: usize, output: usize, bias: bool) -> Result<Linear> {
+        Self::with_std(params, name, input, output, bias, (1.0 / input as f32).sqrt())
+    }
+
+    /// A layer whose weights start at N(0, std²): a small `std` makes an output head start near
+    /// zero, so early losses measure the data, not the initialisation.
+    pub fn with_std(
+        params: &mut Params,
+        name: &str,
+        input: usize,
+        output: usize,
+        bias: bool,
+        std: f32,
+    ) -> Result<Linear> {
         params.scope(name, |p| {
-            let weight = p.normal("w", &[input, output], (1.0 / input as f32).sqrt())?;
+            let weight = p.normal("w", &[input, output], std)?;
             let bias = if bias { Some(p.constant("b", &[output], 0.0)?) } else { None };
             Ok(Linear { weight, bias, out: output })
         })
@@ -51,7 +64,8 @@ pub struct LayerNorm {
 impl LayerNorm {
     /// A layer norm over `dim` features, starting as the identity normalisation.
     pub fn new(params: &mut Params, name: &str, dim: usize) -> Result<LayerNorm> {
-        params.scope(name, |p| Ok(LayerNorm { gain: p.constant("g", &[dim], 1.0)?, bias: p.constant("b", &[dim], 0.0)? }))
+        params
+            .scope(name, |p| Ok(LayerNorm { gain: p.constant("g", &[dim], 1.0)?, bias: p.constant("b", &[dim], 0.0)? }))
     }
 
     /// Normalises the last dimension.

@@ -4,7 +4,7 @@ use candle_core::{DType, Device, Result, Tensor, Var};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 /// A model's parameters by name. Names are `/`-separated paths (`encoder/block0/attn/qkv/w`);
@@ -19,7 +19,12 @@ pub struct Params {
 impl Params {
     /// An empty store whose initial values come from `seed`.
     pub fn new(seed: u64) -> Params {
-        Params { vars: BTreeMap::new(), buffers: BTreeMap::new(), prefix: Vec::new(), rng: ChaCha8Rng::seed_from_u64(seed) }
+        Params {
+            vars: BTreeMap::new(),
+            buffers: BTreeMap::new(),
+            prefix: Vec::new(),
+            rng: ChaCha8Rng::seed_from_u64(seed),
+        }
     }
 
     /// Runs `build` with `name` appended to the path of every parameter it creates.
@@ -78,30 +83,25 @@ impl Params {
         self.buffers.insert(name.to_string(), tensor);
     }
 
-    /// A buffer set before or loaded from a checkpoint.
-    pub fn buffer(&self, name: &str) -> Option<&Tensor> {
-        self.buffers.get(name)
-    }
-
     /// Writes every parameter and buffer to a safetensors file.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let mut map: std::collections::HashMap<&String, Tensor> =
-            self.vars.iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
+        let mut map: HashMap<&String, Tensor> = self.vars.iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
         map.extend(self.buffers.iter().map(|(k, t)| (k, t.clone())));
         candle_core::safetensors::save(&map, path)
     }
 
     /// Overwrites every parameter with the file's value of the same name; a parameter missing from
-    /// the file or of another shape is an error (a checkpoint of another configuration).
-    pub fn load(&mut self, path: &Path) -> Result<()> {
+    /// the file or of another shape is an error (a checkpoint of another configuration). Returns
+    /// the file's other tensors (buffers such as codebooks, or parts of a larger model).
+    pub fn load(&mut self, path: &Path) -> Result<HashMap<String, Tensor>> {
         let tensors = candle_core::safetensors::load(path, &Device::Cpu)?;
-        self.assign(&tensors)
+        self.assign(tensors)
     }
 
-    /// Overwrites parameters from named tensors (see [`Params::load`]).
-    pub fn assign(&mut self, tensors: &std::collections::HashMap<String, Tensor>) -> Result<()> {
+    /// Overwrites parameters from named tensors and returns the rest (see [`Params::load`]).
+    pub fn assign(&mut self, mut tensors: HashMap<String, Tensor>) -> Result<HashMap<String, Tensor>> {
         for (name, var) in &self.vars {
-            let Some(t) = tensors.get(name) else {
+            let Some(t) = tensors.remove(name) else {
                 candle_core::bail!("the checkpoint has no parameter {name}");
             };
             if t.dims() != var.dims() {
@@ -109,11 +109,6 @@ impl Params {
             }
             var.set(&t.to_dtype(DType::F32)?)?;
         }
-        for (name, t) in tensors {
-            if !self.vars.contains_key(name) {
-                self.buffers.insert(name.clone(), t.to_dtype(DType::F32)?);
-            }
-        }
-        Ok(())
+        Ok(tensors)
     }
 }

@@ -11,6 +11,8 @@ use glam::Vec3;
 pub const NODE_INPUT_DIM: usize = 2 * EMBEDDING_DIM;
 /// Text of the global node.
 pub const GLOBAL_NODE_TEXT: &str = "global";
+/// Label text standing in for a hidden label.
+pub const UNKNOWN_LABEL_TEXT: &str = "joint";
 
 /// One skeleton, ready for OwO.
 #[derive(Clone, Debug)]
@@ -45,6 +47,18 @@ impl SkeletonGraph {
             node_text,
             labels,
         })
+    }
+
+    /// Hides the semantic label of the joints for which `hide` is true, putting `unknown` (the
+    /// embedding of a label-less phrase) in its place: the graph then knows those joints only by
+    /// their written names and their place in the tree.
+    pub fn hide_labels(&mut self, unknown: &[f32], hide: impl Fn(usize) -> bool) {
+        for j in 0..self.joints() {
+            if hide(j) {
+                let k = j * NODE_INPUT_DIM + EMBEDDING_DIM;
+                self.node_text[k..k + EMBEDDING_DIM].copy_from_slice(unknown);
+            }
+        }
     }
 
     /// Number of joints.

@@ -25,34 +25,46 @@ impl Default for OwoConfig {
     }
 }
 
+/// Eq. 10's edge update and its FFN; the last block has none, since nothing reads its edges.
+struct EdgeUpdate {
+    src: Linear,
+    dst: Linear,
+    ff: FeedForward,
+    norm: LayerNorm,
+}
+
 struct Block {
     node: Linear,
     score: Linear,
     score_edge: Linear,
     value: Linear,
-    edge_src: Linear,
-    edge_dst: Linear,
     node_ff: FeedForward,
     node_norm: LayerNorm,
-    edge_ff: FeedForward,
-    edge_norm: LayerNorm,
+    edge: Option<EdgeUpdate>,
     heads: usize,
 }
 
 impl Block {
-    fn new(p: &mut Params, name: &str, dim: usize, heads: usize) -> Result<Block> {
+    fn new(p: &mut Params, name: &str, dim: usize, heads: usize, updates_edges: bool) -> Result<Block> {
         p.scope(name, |p| {
+            let edge = if updates_edges {
+                Some(EdgeUpdate {
+                    src: Linear::with_bias(p, "edge_src", dim, dim, false)?,
+                    dst: Linear::with_bias(p, "edge_dst", dim, dim, false)?,
+                    ff: FeedForward::new(p, "edge_ff", dim, 2 * dim, dim)?,
+                    norm: LayerNorm::new(p, "edge_norm", dim)?,
+                })
+            } else {
+                None
+            };
             Ok(Block {
                 node: Linear::with_bias(p, "node", dim, dim, false)?,
                 score: Linear::with_bias(p, "score", dim, 2 * heads, false)?,
                 score_edge: Linear::with_bias(p, "score_edge", dim, heads, false)?,
                 value: Linear::new(p, "value", 2 * dim, dim)?,
-                edge_src: Linear::with_bias(p, "edge_src", dim, dim, false)?,
-                edge_dst: Linear::with_bias(p, "edge_dst", dim, dim, false)?,
                 node_ff: FeedForward::new(p, "node_ff", dim, 2 * dim, dim)?,
                 node_norm: LayerNorm::new(p, "node_norm", dim)?,
-                edge_ff: FeedForward::new(p, "edge_ff", dim, 2 * dim, dim)?,
-                edge_norm: LayerNorm::new(p, "edge_norm", dim)?,
+                edge,
                 heads,
             })
         })
@@ -66,8 +78,8 @@ impl Block {
         let wh = self.node.forward(h)?;
         // a^T [W h_j || W h_k || e_kj], split into its node and edge parts (eq. 8).
         let s = self.score.forward(&wh)?;
-        let s_target = s.narrow(1, 0, heads)?.index_select(dst, 0)?;
-        let s_source = s.narrow(1, heads, heads)?.index_select(src, 0)?;
+        let s_target = s.narrow(1, 0, heads)?.contiguous()?.index_select(dst, 0)?;
+        let s_source = s.narrow(1, heads, heads)?.contiguous()?.index_select(src, 0)?;
         let scores = candle_nn::ops::leaky_relu(&((s_target + s_source)? + self.score_edge.forward(e)?)?, 0.2)?;
         // Softmax over each node's incoming edges; the shift is constant per head, so exact.
         let shift = scores.max_keepdim(0)?.detach();
@@ -76,15 +88,21 @@ impl Block {
         let alpha = (weights / totals.index_select(dst, 0)?)?;
         // Messages W_v [h_k || e_kj] (eq. 9), weighted and summed per target (eq. 7).
         let h_source = h.index_select(src, 0)?;
-        let values = self.value.forward(&Tensor::cat(&[&h_source, e], D::Minus1)?)?.reshape((edges, heads, d / heads))?;
+        let values =
+            self.value.forward(&Tensor::cat(&[&h_source, e], D::Minus1)?)?.reshape((edges, heads, d / heads))?;
         let messages = values.broadcast_mul(&alpha.unsqueeze(2)?)?.reshape((edges, d))?;
         let gathered = Tensor::zeros((n, d), h.dtype(), h.device())?.index_add(dst, &messages, 0)?;
         // FFN and residual layer norm (eq. 11-12).
         let h_next = self.node_norm.forward(&(h + self.node_ff.forward(&gathered)?.relu()?)?)?;
         // Edge update (eq. 10), then the same FFN and norm.
-        let e_tilde = ((e + self.edge_src.forward(&wh.index_select(dst, 0)?)?)?
-            + self.edge_dst.forward(&wh.index_select(src, 0)?)?)?;
-        let e_next = self.edge_norm.forward(&(&e_tilde + self.edge_ff.forward(&e_tilde)?)?)?;
+        let e_next = match &self.edge {
+            Some(u) => {
+                let e_tilde =
+                    ((e + u.src.forward(&wh.index_select(dst, 0)?)?)? + u.dst.forward(&wh.index_select(src, 0)?)?)?;
+                u.norm.forward(&(&e_tilde + u.ff.forward(&e_tilde)?)?)?
+            }
+            None => e.clone(),
+        };
         Ok((h_next, e_next))
     }
 }
@@ -106,7 +124,9 @@ impl Owo {
                 config,
                 node_init: Linear::new(p, "node_init", NODE_INPUT_DIM, d)?,
                 edge_init: Linear::new(p, "edge_init", 2 * d + 6 * config.freqs, d)?,
-                blocks: (0..config.blocks).map(|i| Block::new(p, &format!("block{i}"), d, config.heads)).collect::<Result<_>>()?,
+                blocks: (0..config.blocks)
+                    .map(|i| Block::new(p, &format!("block{i}"), d, config.heads, i + 1 < config.blocks))
+                    .collect::<Result<_>>()?,
             })
         })
     }

@@ -2,7 +2,7 @@
 //! common ancestor by query-key attention (topology), and joint-label InfoNCE (semantics), on
 //! real skeletons and their synthetic variants.
 
-use super::graph::{GLOBAL_NODE_TEXT, GraphBatch, SkeletonGraph};
+use super::graph::{GLOBAL_NODE_TEXT, GraphBatch, SkeletonGraph, UNKNOWN_LABEL_TEXT};
 use super::model::{Owo, OwoConfig};
 use super::variants::random_variant;
 use crate::nn::{FeedForward, Params};
@@ -36,6 +36,9 @@ pub struct PretrainConfig {
     pub weights: [f32; 3],
     /// InfoNCE temperature.
     pub temperature: f32,
+    /// Probability that a joint's semantic label is hidden from the input, so the label head
+    /// must infer it from the written name and the tree.
+    pub hide_label: f64,
 }
 
 impl Default for PretrainConfig {
@@ -51,6 +54,7 @@ impl Default for PretrainConfig {
             seed: 0,
             weights: [1.0, 1.0, 1.0],
             temperature: 0.1,
+            hide_label: 0.5,
         }
     }
 }
@@ -174,7 +178,8 @@ pub fn losses(
             key_index.push((start + j.min(joints - 1)) as u32);
             key_mask.push(if j < joints { 0.0f32 } else { -1e9 });
         }
-        let pairs_here = targets.pairs_a.iter().filter(|&&p| (p as usize) >= start && (p as usize) < start + joints).count();
+        let pairs_here =
+            targets.pairs_a.iter().filter(|&&p| (p as usize) >= start && (p as usize) < start + joints).count();
         pair_skeleton.extend(std::iter::repeat_n(s as u32, pairs_here));
     }
     let skeletons = batch.ranges.len();
@@ -242,26 +247,43 @@ pub struct Pretrainer {
     config: PretrainConfig,
     skeletons: Vec<Skeleton>,
     global_text: Vec<f32>,
+    unknown_text: Vec<f32>,
 }
 
 impl Pretrainer {
     /// A fresh model over the given training skeletons (diameter-normalised or not).
-    pub fn new(config: PretrainConfig, skeletons: Vec<Skeleton>, encoder: &mut CachedEncoder) -> std::result::Result<Pretrainer, PretrainError> {
+    pub fn new(
+        config: PretrainConfig,
+        skeletons: Vec<Skeleton>,
+        encoder: &mut CachedEncoder,
+    ) -> std::result::Result<Pretrainer, PretrainError> {
         let mut params = Params::new(config.seed);
         let owo = Owo::new(&mut params, config.owo)?;
         let heads = Heads::new(&mut params, config.owo.dim)?;
         let global_text = encoder.encode(&[GLOBAL_NODE_TEXT])?.remove(0);
-        Ok(Pretrainer { params, owo, heads, config, skeletons, global_text })
+        let unknown_text = encoder.encode(&[UNKNOWN_LABEL_TEXT])?.remove(0);
+        Ok(Pretrainer { params, owo, heads, config, skeletons, global_text, unknown_text })
     }
 
     /// The losses of training step `step` (its sample depends only on the seed and the step).
-    pub fn step_losses(&self, step: u64, encoder: &mut CachedEncoder) -> std::result::Result<(Tensor, [f32; 3], HeadScores), PretrainError> {
+    pub fn step_losses(
+        &self,
+        step: u64,
+        encoder: &mut CachedEncoder,
+    ) -> std::result::Result<(Tensor, [f32; 3], HeadScores), PretrainError> {
         let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed.wrapping_mul(0x9E37_79B9).wrapping_add(step));
         let mut graphs = Vec::with_capacity(self.config.skeletons_per_step);
         for _ in 0..self.config.skeletons_per_step {
             let base = &self.skeletons[rng.random_range(0..self.skeletons.len())];
-            let s = if rng.random_bool(self.config.variant_probability) { random_variant(base, &mut rng) } else { base.clone() };
-            graphs.push(SkeletonGraph::new(&s, encoder)?);
+            let s = if rng.random_bool(self.config.variant_probability) {
+                random_variant(base, &mut rng)
+            } else {
+                base.clone()
+            };
+            let mut g = SkeletonGraph::new(&s, encoder)?;
+            let hidden: Vec<bool> = (0..g.joints()).map(|_| rng.random_bool(self.config.hide_label)).collect();
+            g.hide_labels(&self.unknown_text, |j| hidden[j]);
+            graphs.push(g);
         }
         let refs: Vec<&SkeletonGraph> = graphs.iter().collect();
         let batch = GraphBatch::new(&refs, &self.global_text, self.config.owo.freqs)?;
@@ -273,9 +295,22 @@ impl Pretrainer {
         Ok((total, values, scores))
     }
 
-    /// Head accuracies on whole skeletons (every joint pair), e.g. the zero-shot ones.
-    pub fn evaluate(&self, skeletons: &[Skeleton], encoder: &mut CachedEncoder) -> std::result::Result<HeadScores, PretrainError> {
-        let graphs: Vec<SkeletonGraph> = skeletons.iter().map(|s| SkeletonGraph::new(s, encoder)).collect::<std::result::Result<_, _>>()?;
+    /// Head accuracies on whole skeletons (every joint pair), e.g. the zero-shot ones. With
+    /// `hide_labels`, every label is hidden from the input, so label retrieval measures what OwO
+    /// infers from written names and structure alone.
+    pub fn evaluate(
+        &self,
+        skeletons: &[Skeleton],
+        hide_labels: bool,
+        encoder: &mut CachedEncoder,
+    ) -> std::result::Result<HeadScores, PretrainError> {
+        let mut graphs: Vec<SkeletonGraph> =
+            skeletons.iter().map(|s| SkeletonGraph::new(s, encoder)).collect::<std::result::Result<_, _>>()?;
+        if hide_labels {
+            for g in &mut graphs {
+                g.hide_labels(&self.unknown_text, |_| true);
+            }
+        }
         let mut sum = HeadScores::default();
         for g in &graphs {
             let batch = GraphBatch::new(&[g], &self.global_text, self.config.owo.freqs)?;
@@ -286,7 +321,11 @@ impl Pretrainer {
             sum.label_accuracy += s.label_accuracy;
         }
         let n = graphs.len().max(1) as f32;
-        Ok(HeadScores { offset_error: sum.offset_error / n, lca_accuracy: sum.lca_accuracy / n, label_accuracy: sum.label_accuracy / n })
+        Ok(HeadScores {
+            offset_error: sum.offset_error / n,
+            lca_accuracy: sum.lca_accuracy / n,
+            label_accuracy: sum.label_accuracy / n,
+        })
     }
 
     /// The learning rate at `step`: linear warm-up, then cosine decay to a tenth.

@@ -172,7 +172,6 @@ pub fn random_variant(skeleton: &Skeleton, rng: &mut impl Rng) -> Skeleton {
     s
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

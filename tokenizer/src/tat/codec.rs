@@ -12,6 +12,7 @@ use crate::owo::{Owo, OwoConfig};
 use candle_core::{D, Device, Result, Tensor};
 
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// A codec's output for a batch: the prediction, the commitment loss and the tokens.
 pub struct Reconstruction {
@@ -26,15 +27,21 @@ pub struct Reconstruction {
 /// A trainable motion tokenizer.
 pub trait Codec {
     /// Encodes, quantises and decodes a batch of one skeleton (`graph` names its joints).
-    fn reconstruct(&mut self, batch: &Prepared, graph: &SkeletonGraph, training: bool, rng: &mut dyn rand::RngCore) -> Result<Reconstruction>;
+    fn reconstruct(
+        &mut self,
+        batch: &Prepared,
+        graph: &SkeletonGraph,
+        training: bool,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<Reconstruction>;
     /// The trainable parameters (with buffers such as codebooks).
     fn params(&self) -> &Params;
     /// Mutable access, for loading.
     fn params_mut(&mut self) -> &mut Params;
     /// Copies non-gradient state (codebooks) into the parameter buffers before saving.
     fn sync_buffers(&mut self) -> Result<()>;
-    /// Restores non-gradient state after loading.
-    fn restore_buffers(&mut self) -> Result<()>;
+    /// Restores non-gradient state from the tensors loading the parameters left over.
+    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()>;
     /// Root statistics the codec normalises with.
     fn root_stats(&self) -> &RootStats;
     /// Loss weights.
@@ -72,8 +79,8 @@ impl TokenizerConfig {
                 dim: 128,
                 heads: 4,
                 ff: 256,
-                blocks: 2,
-                spatial_layers: 1,
+                blocks: 1,
+                spatial_layers: 2,
                 condition_dim: owo.dim + 6 * offset_freqs,
                 fusion,
             },
@@ -167,7 +174,13 @@ fn split_output(out: &Tensor) -> Result<Prediction> {
 }
 
 impl Codec for Tat {
-    fn reconstruct(&mut self, batch: &Prepared, graph: &SkeletonGraph, training: bool, rng: &mut dyn rand::RngCore) -> Result<Reconstruction> {
+    fn reconstruct(
+        &mut self,
+        batch: &Prepared,
+        graph: &SkeletonGraph,
+        training: bool,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<Reconstruction> {
         let condition = self.condition(graph, &batch.offsets)?;
         let latent = self.encoder.forward(&batch.input, &condition)?;
         let (b, t, c) = latent.dims3()?;
@@ -184,8 +197,8 @@ impl Codec for Tat {
     fn sync_buffers(&mut self) -> Result<()> {
         self.rvq.save_into(&mut self.params, "rvq")
     }
-    fn restore_buffers(&mut self) -> Result<()> {
-        self.rvq.load_from(&self.params, "rvq")
+    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        self.rvq.load_from(tensors, "rvq")
     }
     fn root_stats(&self) -> &RootStats {
         &self.config.root
@@ -235,15 +248,27 @@ impl Baseline {
         let frame = config.max_joints * ROT_DIMS + 4;
         let input = Linear::new(&mut p, "input", frame, d)?;
         let down = (0..config.blocks)
-            .map(|i| Ok((Downsample::new(&mut p, &format!("down{i}"), d)?, ResBlock::new(&mut p, &format!("down{i}/res0"), d, 1)?, ResBlock::new(&mut p, &format!("down{i}/res1"), d, 3)?)))
+            .map(|i| {
+                Ok((
+                    Downsample::new(&mut p, &format!("down{i}"), d)?,
+                    ResBlock::new(&mut p, &format!("down{i}/res0"), d, 1)?,
+                    ResBlock::new(&mut p, &format!("down{i}/res1"), d, 3)?,
+                ))
+            })
             .collect::<Result<_>>()?;
         let norm = LayerNorm::new(&mut p, "norm", d)?;
         let to_code = Linear::new(&mut p, "to_code", d, config.rvq.dim)?;
         let from_code = Linear::new(&mut p, "from_code", config.rvq.dim, d)?;
         let up = (0..config.blocks)
-            .map(|i| Ok((ResBlock::new(&mut p, &format!("up{i}/res0"), d, 3)?, ResBlock::new(&mut p, &format!("up{i}/res1"), d, 1)?, Upsample::new(&mut p, &format!("up{i}"), d)?)))
+            .map(|i| {
+                Ok((
+                    ResBlock::new(&mut p, &format!("up{i}/res0"), d, 3)?,
+                    ResBlock::new(&mut p, &format!("up{i}/res1"), d, 1)?,
+                    Upsample::new(&mut p, &format!("up{i}"), d)?,
+                ))
+            })
             .collect::<Result<_>>()?;
-        let output = Linear::new(&mut p, "output", d, frame)?;
+        let output = Linear::with_std(&mut p, "output", d, frame, true, 0.01)?;
         let rvq = Rvq::new(config.rvq);
         Ok(Baseline { config, params: p, input, down, norm, to_code, from_code, up, output, rvq })
     }
@@ -255,7 +280,13 @@ impl Baseline {
 }
 
 impl Codec for Baseline {
-    fn reconstruct(&mut self, batch: &Prepared, _graph: &SkeletonGraph, training: bool, rng: &mut dyn rand::RngCore) -> Result<Reconstruction> {
+    fn reconstruct(
+        &mut self,
+        batch: &Prepared,
+        _graph: &SkeletonGraph,
+        training: bool,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<Reconstruction> {
         let (b, t, j, _) = batch.rotations.dims4()?;
         let max = self.config.max_joints;
         if j > max {
@@ -263,7 +294,10 @@ impl Codec for Baseline {
         }
         let mut rot = batch.rotations.reshape((b, t, j * ROT_DIMS))?;
         if j < max {
-            rot = Tensor::cat(&[&rot, &Tensor::zeros((b, t, (max - j) * ROT_DIMS), rot.dtype(), rot.device())?], D::Minus1)?;
+            rot = Tensor::cat(
+                &[&rot, &Tensor::zeros((b, t, (max - j) * ROT_DIMS), rot.dtype(), rot.device())?],
+                D::Minus1,
+            )?;
         }
         let x = Tensor::cat(&[&rot, &batch.root], D::Minus1)?;
         let mut h = self.input.forward(&x)?;
@@ -280,7 +314,11 @@ impl Codec for Baseline {
         let out = self.output.forward(&h)?;
         let rotations = out.narrow(D::Minus1, 0, j * ROT_DIMS)?.reshape((b, t, j, ROT_DIMS))?;
         let root = out.narrow(D::Minus1, max * ROT_DIMS, 4)?;
-        Ok(Reconstruction { prediction: Prediction { rotations, root, contacts: None }, commitment: q.commitment, codes: q.codes })
+        Ok(Reconstruction {
+            prediction: Prediction { rotations, root, contacts: None },
+            commitment: q.commitment,
+            codes: q.codes,
+        })
     }
     fn params(&self) -> &Params {
         &self.params
@@ -291,8 +329,8 @@ impl Codec for Baseline {
     fn sync_buffers(&mut self) -> Result<()> {
         self.rvq.save_into(&mut self.params, "rvq")
     }
-    fn restore_buffers(&mut self) -> Result<()> {
-        self.rvq.load_from(&self.params, "rvq")
+    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        self.rvq.load_from(tensors, "rvq")
     }
     fn root_stats(&self) -> &RootStats {
         &self.config.root
@@ -301,4 +339,3 @@ impl Codec for Baseline {
         &self.config.weights
     }
 }
-

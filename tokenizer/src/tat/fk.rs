@@ -23,7 +23,10 @@ fn cross(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     let c = |t: &Tensor, i: usize| t.narrow(D::Minus1, i, 1);
     let (a0, a1, a2) = (c(a, 0)?, c(a, 1)?, c(a, 2)?);
     let (b0, b1, b2) = (c(b, 0)?, c(b, 1)?, c(b, 2)?);
-    Tensor::cat(&[((&a1 * &b2)? - (&a2 * &b1)?)?, ((&a2 * &b0)? - (&a0 * &b2)?)?, ((&a0 * &b1)? - (&a1 * &b0)?)?], D::Minus1)
+    Tensor::cat(
+        &[((&a1 * &b2)? - (&a2 * &b1)?)?, ((&a2 * &b0)? - (&a0 * &b2)?)?, ((&a0 * &b1)? - (&a1 * &b0)?)?],
+        D::Minus1,
+    )
 }
 
 /// `m v` for column-major `m (..., 3, 3)` and `v (..., 3)`.
@@ -59,13 +62,16 @@ impl Levels {
             }
         }
         let max = depth.iter().copied().max().unwrap_or(0);
-        let levels: Vec<Vec<usize>> = (0..=max).map(|d| (0..parents.len()).filter(|&j| depth[j] == d).collect()).collect();
+        let levels: Vec<Vec<usize>> =
+            (0..=max).map(|d| (0..parents.len()).filter(|&j| depth[j] == d).collect()).collect();
         let device = Device::Cpu;
         let mut parent_slots = Vec::new();
         for d in 1..levels.len() {
             let slots: Vec<u32> = levels[d]
                 .iter()
-                .map(|&j| levels[d - 1].iter().position(|&k| Some(k) == parents[j]).expect("parent one level up") as u32)
+                .map(|&j| {
+                    levels[d - 1].iter().position(|&k| Some(k) == parents[j]).expect("parent one level up") as u32
+                })
                 .collect();
             parent_slots.push(Tensor::from_vec(slots, levels[d].len(), &device)?);
         }

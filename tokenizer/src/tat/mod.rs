@@ -8,6 +8,7 @@ pub mod model;
 pub mod objective;
 pub mod rvq;
 pub mod temporal;
+pub mod window;
 
 pub use codec::{Baseline, BaselineConfig, Codec, Tat, TokenizerConfig};
 pub use model::{Fusion, TatConfig};

@@ -32,7 +32,7 @@ pub struct TatConfig {
     pub heads: usize,
     /// Feed-forward width of the spatial transformers.
     pub ff: usize,
-    /// Spatio-temporal blocks; each halves the frame rate.
+    /// Spatio-temporal blocks; each halves the frame rate (after the input layer's halving).
     pub blocks: usize,
     /// Spatial transformer layers per block.
     pub spatial_layers: usize,
@@ -43,45 +43,51 @@ pub struct TatConfig {
 }
 
 impl TatConfig {
-    /// Frames per token.
+    /// Frames per token: the input layer halves the rate, then every block halves it.
     pub fn frames_per_token(&self) -> usize {
-        1 << self.blocks
+        2 << self.blocks
     }
 }
 
-/// Gated FiLM or additive fusion of a per-joint condition into per-joint features.
-struct Modulation {
-    fusion: Fusion,
-    condition: Linear,
+/// The parts of gated FiLM (SATA eq. 2-3).
+struct Film {
     norm: LayerNorm,
     scale_shift: Linear,
     gate: Linear,
 }
 
+/// Gated FiLM or additive fusion of a per-joint condition into per-joint features.
+struct Modulation {
+    condition: Linear,
+    film: Option<Film>,
+}
+
 impl Modulation {
     fn new(p: &mut Params, name: &str, condition_dim: usize, dim: usize, fusion: Fusion) -> Result<Modulation> {
         p.scope(name, |p| {
-            Ok(Modulation {
-                fusion,
-                condition: Linear::new(p, "condition", condition_dim, dim)?,
-                norm: LayerNorm::new(p, "norm", dim)?,
-                scale_shift: Linear::new(p, "scale_shift", dim, 2 * dim)?,
-                gate: Linear::new(p, "gate", dim, dim)?,
-            })
+            let film = match fusion {
+                Fusion::Film => Some(Film {
+                    norm: LayerNorm::new(p, "norm", dim)?,
+                    scale_shift: Linear::new(p, "scale_shift", dim, 2 * dim)?,
+                    gate: Linear::new(p, "gate", dim, dim)?,
+                }),
+                Fusion::Additive => None,
+            };
+            Ok(Modulation { condition: Linear::new(p, "condition", condition_dim, dim)?, film })
         })
     }
 
     /// `x (B, T, J, d)`, `condition (B, J, c)`.
     fn forward(&self, x: &Tensor, condition: &Tensor) -> Result<Tensor> {
         let c = self.condition.forward(condition)?.gelu()?;
-        match self.fusion {
-            Fusion::Additive => x.broadcast_add(&c.unsqueeze(1)?),
-            Fusion::Film => {
+        match &self.film {
+            None => x.broadcast_add(&c.unsqueeze(1)?),
+            Some(film) => {
                 let d = c.dim(D::Minus1)?;
-                let ss = self.scale_shift.forward(&c)?.unsqueeze(1)?;
+                let ss = film.scale_shift.forward(&c)?.unsqueeze(1)?;
                 let (scale, shift) = (ss.narrow(D::Minus1, 0, d)?, ss.narrow(D::Minus1, d, d)?);
-                let gate = candle_nn::ops::sigmoid(&self.gate.forward(&c)?)?.unsqueeze(1)?;
-                let modulated = self.norm.forward(x)?.broadcast_mul(&(scale + 1.0)?)?.broadcast_add(&shift)?;
+                let gate = candle_nn::ops::sigmoid(&film.gate.forward(&c)?)?.unsqueeze(1)?;
+                let modulated = film.norm.forward(x)?.broadcast_mul(&(scale + 1.0)?)?.broadcast_add(&shift)?;
                 x + modulated.broadcast_mul(&gate)?
             }
         }
@@ -158,7 +164,7 @@ impl Encoder {
                 })
                 .collect::<Result<_>>()?;
             Ok(Encoder {
-                input: Linear::new(p, "input", INPUT_DIMS, c.dim)?,
+                input: Linear::new(p, "input", 2 * INPUT_DIMS, c.dim)?,
                 modulation: Modulation::new(p, "modulation", c.condition_dim, c.dim, c.fusion)?,
                 virtual_joint: p.normal("virtual_joint", &[c.dim], 0.02)?,
                 blocks,
@@ -168,10 +174,14 @@ impl Encoder {
         })
     }
 
-    /// `input (B, T, J, INPUT_DIMS)`, `condition (B, J, c)` -> latents `(B, T / 2^blocks, code)`.
+    /// `input (B, T, J, INPUT_DIMS)`, `condition (B, J, c)` -> latents `(B, T / 2^(blocks+1), code)`.
+    /// The first layer reads frame pairs (a stride-2 convolution), so no full-rate feature map
+    /// of the model's width is ever built.
     pub fn forward(&self, input: &Tensor, condition: &Tensor) -> Result<Tensor> {
-        let (b, t, _, _) = input.dims4()?;
-        let x = self.modulation.forward(&self.input.forward(input)?, condition)?;
+        let (b, t, j, c) = input.dims4()?;
+        let pairs = input.reshape((b, t / 2, 2, j, c))?.transpose(2, 3)?.reshape((b, t / 2, j, 2 * c))?;
+        let t = t / 2;
+        let x = self.modulation.forward(&self.input.forward(&pairs)?, condition)?;
         let d = x.dim(D::Minus1)?;
         let v = self.virtual_joint.reshape((1, 1, 1, d))?.broadcast_as((b, t, 1, d))?;
         let mut x = Tensor::cat(&[&x, &v], 2)?;
@@ -205,12 +215,13 @@ impl Decoder {
                 modulation: Modulation::new(p, "modulation", c.condition_dim, c.dim, c.fusion)?,
                 blocks,
                 res: ResBlock::new(p, "res", c.dim, 1)?,
-                output: Linear::new(p, "output", c.dim, OUTPUT_DIMS)?,
+                output: Linear::with_std(p, "output", c.dim, 2 * OUTPUT_DIMS, true, 0.01)?,
             })
         })
     }
 
-    /// `latent (B, T', code)`, target `condition (B, J, c)` -> `(B, T' 2^blocks, J, OUTPUT_DIMS)`.
+    /// `latent (B, T', code)`, target `condition (B, J, c)` -> `(B, T' 2^(blocks+1), J, OUTPUT_DIMS)`;
+    /// the last layer writes frame pairs (a stride-2 transposed convolution).
     pub fn forward(&self, latent: &Tensor, condition: &Tensor) -> Result<Tensor> {
         let z = self.latent.forward(latent)?.unsqueeze(2)?;
         let (b, t, _, d) = z.dims4()?;
@@ -222,6 +233,12 @@ impl Decoder {
             x = temporal(&x, |s| block.up.forward(&block.res[1].forward(&block.res[0].forward(s)?)?))?;
         }
         let x = temporal(&x.narrow(2, 0, joints)?, |s| self.res.forward(s))?;
-        self.output.forward(&x)
+        let (b, t, j, _) = x.dims4()?;
+        self.output.forward(&x)?.reshape((b, t, j, 2, OUTPUT_DIMS))?.transpose(2, 3)?.reshape((
+            b,
+            2 * t,
+            j,
+            OUTPUT_DIMS,
+        ))
     }
 }

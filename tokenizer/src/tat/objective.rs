@@ -97,7 +97,8 @@ impl Prepared {
         let positions = levels.positions(&batch.rotations, &batch.offsets, &root_positions(&height)?)?;
         let velocity = velocities(&positions)?;
         let root = stats.normalise(&batch.root)?;
-        let root_slot = Tensor::cat(&[&root.unsqueeze(2)?, &Tensor::zeros((b, t, j - 1, 4), root.dtype(), root.device())?], 2)?;
+        let root_slot =
+            Tensor::cat(&[&root.unsqueeze(2)?, &Tensor::zeros((b, t, j - 1, 4), root.dtype(), root.device())?], 2)?;
         let input = Tensor::cat(&[&batch.rotations, &root_slot, &positions, &(&velocity * 10.0)?], D::Minus1)?;
         let low = positions.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?.lt(CONTACT_HEIGHT)?;
         let planar = Tensor::cat(&[&velocity.narrow(D::Minus1, 0, 1)?, &velocity.narrow(D::Minus1, 2, 1)?], D::Minus1)?;
@@ -147,7 +148,15 @@ pub struct LossWeights {
 
 impl Default for LossWeights {
     fn default() -> Self {
-        LossWeights { rotation: 1.0, root: 0.5, position: 4.0, velocity: 20.0, contact: 0.1, skating: 20.0, commitment: 0.02 }
+        LossWeights {
+            rotation: 1.0,
+            root: 0.5,
+            position: 4.0,
+            velocity: 20.0,
+            contact: 0.1,
+            skating: 20.0,
+            commitment: 0.02,
+        }
     }
 }
 
@@ -173,7 +182,8 @@ pub struct LossParts {
 fn masked_mean(err: &Tensor, mask: &Tensor) -> Result<Tensor> {
     // err: (B, T, ...) ; mask: (B, T)
     let extra: usize = err.dims()[2..].iter().product();
-    let m = mask.reshape(mask.dims().iter().copied().chain(std::iter::repeat_n(1, err.rank() - 2)).collect::<Vec<_>>())?;
+    let m =
+        mask.reshape(mask.dims().iter().copied().chain(std::iter::repeat_n(1, err.rank() - 2)).collect::<Vec<_>>())?;
     let total = err.broadcast_mul(&m)?.sum_all()?;
     total / (mask.sum_all()?.to_scalar::<f32>()? as f64 * extra as f64).max(1.0)
 }

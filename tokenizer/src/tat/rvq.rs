@@ -6,6 +6,7 @@ use crate::nn::Params;
 use candle_core::{Device, Result, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// The quantiser's shape and update rule.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
@@ -196,19 +197,28 @@ impl Rvq {
     pub fn save_into(&self, params: &mut Params, prefix: &str) -> Result<()> {
         let (k, dim) = (self.config.codes, self.config.dim);
         for layer in 0..self.config.layers {
-            params.set_buffer(&format!("{prefix}/codebook{layer}"), Tensor::from_slice(&self.codebooks[layer], (k, dim), &Device::Cpu)?);
-            params.set_buffer(&format!("{prefix}/usage{layer}"), Tensor::from_slice(&self.usage[layer], k, &Device::Cpu)?);
-            params.set_buffer(&format!("{prefix}/sums{layer}"), Tensor::from_slice(&self.sums[layer], (k, dim), &Device::Cpu)?);
+            params.set_buffer(
+                &format!("{prefix}/codebook{layer}"),
+                Tensor::from_slice(&self.codebooks[layer], (k, dim), &Device::Cpu)?,
+            );
+            params.set_buffer(
+                &format!("{prefix}/usage{layer}"),
+                Tensor::from_slice(&self.usage[layer], k, &Device::Cpu)?,
+            );
+            params.set_buffer(
+                &format!("{prefix}/sums{layer}"),
+                Tensor::from_slice(&self.sums[layer], (k, dim), &Device::Cpu)?,
+            );
         }
         Ok(())
     }
 
-    /// Restores what [`Rvq::save_into`] stored.
-    pub fn load_from(&mut self, params: &Params, prefix: &str) -> Result<()> {
+    /// Restores what [`Rvq::save_into`] stored, from the tensors [`Params::load`] returned.
+    pub fn load_from(&mut self, tensors: &HashMap<String, Tensor>, prefix: &str) -> Result<()> {
         for layer in 0..self.config.layers {
             let get = |name: &str| -> Result<Vec<f32>> {
                 let key = format!("{prefix}/{name}{layer}");
-                match params.buffer(&key) {
+                match tensors.get(&key) {
                     Some(t) => t.flatten_all()?.to_vec1(),
                     None => candle_core::bail!("the checkpoint has no {key}"),
                 }

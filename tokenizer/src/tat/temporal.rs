@@ -56,7 +56,11 @@ impl ResBlock {
     /// A block of width `dim` whose kernel-3 convolution skips `dilation` frames.
     pub fn new(params: &mut Params, name: &str, dim: usize, dilation: usize) -> Result<ResBlock> {
         params.scope(name, |p| {
-            Ok(ResBlock { conv: Linear::new(p, "conv", 3 * dim, dim)?, out: Linear::new(p, "out", dim, dim)?, dilation })
+            Ok(ResBlock {
+                conv: Linear::new(p, "conv", 3 * dim, dim)?,
+                out: Linear::new(p, "out", dim, dim)?,
+                dilation,
+            })
         })
     }
 

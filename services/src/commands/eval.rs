@@ -1,0 +1,200 @@
+//! `anymo eval tokenizer`: the reconstruction table (TAT, baseline, ablations) on the test and
+//! zero-shot splits, per source, and TAT's zero-shot transfer figures.
+
+use super::context::StoreArgs;
+use anyhow::{Context, Result};
+use anymo_services::models::codecs::{self, Graphs};
+use anymo_services::models::data::{self, ModelClip};
+use anymo_services::models::evaluate::{self, Sums, TransferScores};
+use anymo_services::models::shipped;
+use anymo_tokenizer::dataset::Split;
+use anymo_tokenizer::text::CachedEncoder;
+use clap::{Parser, Subcommand};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+#[derive(Subcommand)]
+enum What {
+    /// Reconstruction and transfer of the trained tokenizers.
+    Tokenizer(TokenizerArgs),
+}
+
+#[derive(Parser)]
+struct TokenizerArgs {
+    /// The corpus manifest.
+    #[arg(long, default_value = "../shared/data/manifest.tsv")]
+    manifest: PathBuf,
+    /// Checkpoints to compare, by name.
+    #[arg(long, value_delimiter = ',', default_value = "tat,baseline,tat-additive,tat-scratch")]
+    models: Vec<String>,
+    /// Use at most this many clips per split.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Source clips per transfer direction.
+    #[arg(long, default_value_t = 8)]
+    transfer_clips: usize,
+    /// The checkpoints' folder.
+    #[arg(long, default_value_os_t = shipped::default_dir())]
+    dir: PathBuf,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Record the results in each model's card.
+    #[arg(long)]
+    record: bool,
+    #[command(flatten)]
+    store: StoreArgs,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    match args.what {
+        What::Tokenizer(a) => tokenizer(a),
+    }
+}
+
+fn f(x: f64) -> String {
+    format!("{x:.4}")
+}
+
+fn tokenizer(args: TokenizerArgs) -> Result<()> {
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let (clips, rejected) = data::load_manifest(&args.manifest, args.limit)
+        .with_context(|| format!("reading the manifest {}", args.manifest.display()))?;
+    let eval_clips: Vec<&ModelClip> = clips.iter().filter(|c| c.split != Split::Train).collect();
+    eprintln!("{} test and zero-shot clips ({rejected} rejected by cleaning)", eval_clips.len());
+    let mut encoder = CachedEncoder::new(args.store.encoder()?);
+    let mut results = serde_json::Map::new();
+    let mut table = String::from(
+        "| model | split | clips | MPJPE | MPJPE (with trans) | GeoDist (deg) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut per_source = String::from(
+        "| model | split | source | clips | MPJPE | MPJPE (with trans) | GeoDist (deg) |\n|---|---|---|---|---|---|---|\n",
+    );
+    for name in &args.models {
+        let (mut codec, card) = codecs::load(&args.dir, name, &mut encoder)?;
+        let (window, overlap) = card.config.get("tokenizer").map_or((64, 16), |t| {
+            (t["window"].as_u64().unwrap_or(64) as usize, t["overlap"].as_u64().unwrap_or(16) as usize)
+        });
+        let mut graphs = Graphs::new(&mut encoder);
+        let rec = evaluate::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, window, overlap)?;
+        let mut by_split: BTreeMap<String, Sums> = BTreeMap::new();
+        let mut model_json = serde_json::Map::new();
+        for ((split, source), sums) in &rec.groups {
+            by_split.entry(split.clone()).or_default().merge(sums);
+            let s = sums.scores();
+            per_source.push_str(&format!(
+                "| {name} | {split} | {source} | {} | {} | {} | {:.2} |\n",
+                s.clips,
+                f(s.mpjpe),
+                f(s.mpjpe_trans),
+                s.geodist
+            ));
+            model_json.insert(format!("{split}/{source}"), serde_json::to_value(s)?);
+        }
+        for (split, sums) in &by_split {
+            let s = sums.scores();
+            table.push_str(&format!(
+                "| {name} | {split} | {} | {} | {} | {:.2} | {} | {} | {} | {} |\n",
+                s.clips,
+                f(s.mpjpe),
+                f(s.mpjpe_trans),
+                s.geodist,
+                f(s.fs),
+                f(s.gp),
+                f(s.fs_truth),
+                f(s.gp_truth)
+            ));
+            model_json.insert(split.clone(), serde_json::to_value(s)?);
+        }
+        if rec.refused > 0 {
+            table.push_str(&format!(
+                "| {name} | refused | {} | (skeleton larger than the model takes) | | | | | | |\n",
+                rec.refused
+            ));
+            model_json.insert("refused".into(), rec.refused.into());
+        }
+        if args.record {
+            let (_, card_path) = shipped::files(&args.dir, name);
+            let mut card = card;
+            card.metrics["reconstruction"] = serde_json::Value::Object(model_json.clone());
+            card.metrics["measured_by"] = command.clone().into();
+            card.save(&card_path)?;
+        }
+        results.insert(name.clone(), serde_json::Value::Object(model_json));
+    }
+    println!("{table}\n{per_source}");
+    if args.models.iter().any(|m| m == "tat") {
+        let transfers = transfer_table(&args, &clips, &mut encoder)?;
+        let mut t = String::from(
+            "| transfer | target | clips | cycle MPJPE | reconstruction MPJPE | FS | GP | distance correlation |\n|---|---|---|---|---|---|---|---|\n",
+        );
+        for s in &transfers {
+            t.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {:.3} |\n",
+                s.name,
+                s.target,
+                s.clips,
+                f(s.cycle_mpjpe),
+                f(s.reconstruction_mpjpe),
+                f(s.fs),
+                f(s.gp),
+                s.distance_correlation
+            ));
+        }
+        println!("{t}");
+        if args.record {
+            let (_, card_path) = shipped::files(&args.dir, "tat");
+            let mut card = shipped::card(&args.dir, "tat")?;
+            card.metrics["transfer"] = serde_json::to_value(&transfers)?;
+            card.save(&card_path)?;
+        }
+        results.insert("transfer".into(), serde_json::to_value(&transfers)?);
+    }
+    results.insert("command".into(), command.into());
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&results)?)?;
+    }
+    Ok(())
+}
+
+/// Human -> human of other proportions, human -> quadruped, quadruped -> quadruped, each from
+/// test clips onto a skeleton of another subject.
+fn transfer_table(
+    args: &TokenizerArgs,
+    clips: &[ModelClip],
+    encoder: &mut CachedEncoder,
+) -> Result<Vec<TransferScores>> {
+    let (mut tat, _) = shipped::load_tat(&args.dir, "tat", encoder)?;
+    let mut graphs = Graphs::new(encoder);
+    let pick = |source: &str, split: Split| -> Vec<&ModelClip> {
+        clips.iter().filter(|c| c.item.source == source && c.split == split).take(args.transfer_clips).collect()
+    };
+    let first = |subject: &str| clips.iter().find(|c| c.item.subject == subject);
+    let humans = pick("bandai-namco-dataset-2", Split::Test);
+    let horses: Vec<&ModelClip> = clips
+        .iter()
+        .filter(|c| c.item.subject == "horse" && c.split != Split::Train)
+        .take(args.transfer_clips)
+        .collect();
+    let mut out = Vec::new();
+    let plans: [(&str, &Vec<&ModelClip>, Option<&ModelClip>); 4] = [
+        ("human -> human (CMU rig)", &humans, clips.iter().find(|c| c.item.source == "cmu-mocap")),
+        ("human -> human (Xia rig)", &humans, clips.iter().find(|c| c.item.source == "xia-style")),
+        ("human -> quadruped", &humans, first("horse")),
+        ("quadruped -> quadruped", &horses, first("wolf")),
+    ];
+    for (name, sources, target) in plans {
+        let Some(target) = target else { continue };
+        if sources.is_empty() {
+            continue;
+        }
+        out.push(evaluate::transfer(&mut tat, &mut graphs, name, sources, target)?);
+    }
+    Ok(out)
+}

@@ -1,0 +1,258 @@
+//! `anymo train owo|tokenizer`: pretrain the skeleton encoder, train the tokenizer (or the
+//! baseline and ablations) on a manifest's train split, and ship the checkpoint with its card.
+
+use super::context::StoreArgs;
+use anyhow::{Context, Result};
+use anymo_services::models::{data, shipped, train};
+use anymo_tokenizer::dataset::Split;
+use anymo_tokenizer::features::{canonicalise, to_features};
+use anymo_tokenizer::nn::{ModelCard, Params};
+use anymo_tokenizer::owo::graph::GLOBAL_NODE_TEXT;
+use anymo_tokenizer::owo::pretrain::{PretrainConfig, Pretrainer};
+use anymo_tokenizer::owo::{OwoConfig, SkeletonGraph};
+use anymo_tokenizer::skeleton::Skeleton;
+use anymo_tokenizer::tat::objective::{LossWeights, RootStats};
+use anymo_tokenizer::tat::rvq::RvqConfig;
+use anymo_tokenizer::tat::{Baseline, BaselineConfig, Codec, Fusion, Tat, TokenizerConfig};
+use anymo_tokenizer::text::CachedEncoder;
+use clap::{Parser, Subcommand, ValueEnum};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+pub struct Args {
+    #[command(subcommand)]
+    model: Model,
+}
+
+#[derive(Subcommand)]
+enum Model {
+    /// Pretrain OwO on every distinct training skeleton and synthetic variants.
+    Owo(OwoArgs),
+    /// Train TAT (or the zero-padded baseline, or an ablation) on the train split.
+    Tokenizer(TokenizerArgs),
+}
+
+#[derive(Parser)]
+struct Common {
+    /// The corpus manifest.
+    #[arg(long, default_value = "../shared/data/manifest.tsv")]
+    manifest: PathBuf,
+    /// Use at most this many clips per split (a quick run).
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Where the shipped checkpoint is written.
+    #[arg(long, default_value_os_t = shipped::default_dir())]
+    out_dir: PathBuf,
+    /// Where the resumable run state lives (default: DATA_DIR/train/NAME).
+    #[arg(long)]
+    run_dir: Option<PathBuf>,
+    /// Seed of initialisation and sampling.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    store: StoreArgs,
+}
+
+#[derive(Parser)]
+struct OwoArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 3000)]
+    steps: u64,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum Variant {
+    /// TAT with gated FiLM over pretrained OwO.
+    Tat,
+    /// TAT with NEC's additive fusion.
+    TatAdditive,
+    /// TAT over an OwO that was never pretrained (frozen at initialisation).
+    TatScratch,
+    /// The zero-padded RVQ-VAE of NEC Table 1.
+    Baseline,
+}
+
+impl Variant {
+    fn name(self) -> &'static str {
+        match self {
+            Variant::Tat => "tat",
+            Variant::TatAdditive => "tat-additive",
+            Variant::TatScratch => "tat-scratch",
+            Variant::Baseline => "baseline",
+        }
+    }
+}
+
+#[derive(Parser)]
+struct TokenizerArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Which model.
+    #[arg(long, value_enum, default_value = "tat")]
+    variant: Variant,
+    /// Checkpoint name (default: the variant's).
+    #[arg(long)]
+    name: Option<String>,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 4000)]
+    steps: u64,
+    /// Windows per batch (fewer for skeletons with many joints).
+    #[arg(long, default_value_t = 16)]
+    batch_size: usize,
+    /// Peak learning rate.
+    #[arg(long, default_value_t = 5e-4)]
+    lr: f64,
+    /// RVQ layers.
+    #[arg(long, default_value_t = 6)]
+    rvq_layers: usize,
+    /// Codes per RVQ layer.
+    #[arg(long, default_value_t = 1024)]
+    codes: usize,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    match args.model {
+        Model::Owo(a) => owo(a),
+        Model::Tokenizer(a) => tokenizer(a),
+    }
+}
+
+fn command_line() -> String {
+    std::env::args().collect::<Vec<_>>().join(" ")
+}
+
+fn distinct_skeletons<'a>(clips: impl Iterator<Item = &'a data::ModelClip>) -> Vec<Skeleton> {
+    let mut by_topology = BTreeMap::new();
+    for c in clips {
+        by_topology.entry(data::topology(&c.motion)).or_insert_with(|| c.motion.skeleton().clone());
+    }
+    by_topology.into_values().collect()
+}
+
+fn load(common: &Common) -> Result<Vec<data::ModelClip>> {
+    eprintln!("reading {}", common.manifest.display());
+    let (clips, rejected) = data::load_manifest(&common.manifest, common.limit)
+        .with_context(|| format!("reading the manifest {}", common.manifest.display()))?;
+    eprintln!("{} clips usable, {rejected} rejected by cleaning", clips.len());
+    Ok(clips)
+}
+
+fn run_dir(common: &Common, name: &str) -> Result<train::RunDir> {
+    let dir = common.run_dir.clone().unwrap_or_else(|| common.store.data_dir.join("train").join(name));
+    train::RunDir::new(&dir)
+}
+
+fn owo(args: OwoArgs) -> Result<()> {
+    let clips = load(&args.common)?;
+    let train_skeletons = distinct_skeletons(clips.iter().filter(|c| c.split == Split::Train));
+    let zero_shot = distinct_skeletons(clips.iter().filter(|c| c.split == Split::ZeroShot));
+    eprintln!("{} training skeletons, {} zero-shot skeletons", train_skeletons.len(), zero_shot.len());
+    let mut encoder = CachedEncoder::new(args.common.store.encoder()?);
+    let config = PretrainConfig { steps: args.steps, seed: args.common.seed, ..PretrainConfig::default() };
+    let mut pretrainer = Pretrainer::new(config.clone(), train_skeletons.clone(), &mut encoder)?;
+    let run = run_dir(&args.common, "owo")?;
+    let state = train::pretrain_owo(&mut pretrainer, args.steps, &mut encoder, &run)?;
+    let zero = pretrainer.evaluate(&zero_shot, false, &mut encoder)?;
+    let zero_hidden = pretrainer.evaluate(&zero_shot, true, &mut encoder)?;
+    let seen = pretrainer.evaluate(&train_skeletons, false, &mut encoder)?;
+    eprintln!("zero-shot skeletons: {zero:?}\nzero-shot, labels hidden: {zero_hidden:?}\ntraining skeletons: {seen:?}");
+    let train_clips: Vec<&data::ModelClip> = clips.iter().filter(|c| c.split == Split::Train).collect();
+    let card = ModelCard {
+        model: "owo".into(),
+        config: serde_json::to_value(&config)?,
+        data: data::data_record(&args.common.manifest, &train_clips),
+        steps: state.step,
+        metrics: serde_json::json!({
+            "zero_shot_skeletons": zero,
+            "zero_shot_skeletons_labels_hidden": zero_hidden,
+            "training_skeletons": seen,
+            "zero_shot_count": zero_shot.len(),
+            "training_count": train_skeletons.len(),
+            "train_seconds": state.seconds,
+            "measured_by": command_line(),
+        }),
+        command: command_line(),
+    };
+    train::ship(&pretrainer.params, &card, &args.common.out_dir, "owo")?;
+    eprintln!("wrote {}", args.common.out_dir.join("owo.safetensors").display());
+    Ok(())
+}
+
+/// Root statistics over the training clips' features.
+fn root_stats(clips: &[&data::ModelClip]) -> RootStats {
+    let mut all = Vec::new();
+    for c in clips {
+        let (f, _) = to_features(&canonicalise(&c.motion));
+        all.extend_from_slice(&f.root);
+    }
+    RootStats::measure(&all)
+}
+
+fn tokenizer(args: TokenizerArgs) -> Result<()> {
+    let clips = load(&args.common)?;
+    let train_clips: Vec<&data::ModelClip> = clips.iter().filter(|c| c.split == Split::Train).collect();
+    let stats = root_stats(&train_clips);
+    let name = args.name.clone().unwrap_or_else(|| args.variant.name().to_string());
+    let rvq = RvqConfig { layers: args.rvq_layers, codes: args.codes, ..RvqConfig::default() };
+    let mut encoder = CachedEncoder::new(args.common.store.encoder()?);
+    let global = encoder.encode(&[GLOBAL_NODE_TEXT])?.remove(0);
+    let mut owo_params = Params::new(0);
+    let owo_name = match args.variant {
+        Variant::TatScratch => "random".to_string(),
+        _ => "owo".to_string(),
+    };
+    let (mut codec, config): (Box<dyn Codec>, serde_json::Value) = match args.variant {
+        Variant::Baseline => {
+            let max_joints = clips.iter().map(|c| c.motion.skeleton().len()).max().unwrap_or(1);
+            let config =
+                BaselineConfig { max_joints, dim: 256, blocks: 2, rvq, root: stats, weights: LossWeights::default() };
+            let value = serde_json::json!({ "baseline": config });
+            (Box::new(Baseline::new(config, args.common.seed)?), value)
+        }
+        v => {
+            let fusion = if v == Variant::TatAdditive { Fusion::Additive } else { Fusion::Film };
+            let mut config = TokenizerConfig::new(stats, fusion);
+            config.rvq = rvq;
+            config.owo = OwoConfig::default();
+            let tat = Tat::new(config.clone(), args.common.seed, &mut owo_params, global)?;
+            if owo_name != "random" {
+                let (weights, _) = shipped::files(&args.common.out_dir, &owo_name);
+                shipped::card(&args.common.out_dir, &owo_name)?;
+                owo_params.load(&weights).with_context(|| format!("loading {}", weights.display()))?;
+            }
+            let value = serde_json::json!({ "tokenizer": config, "owo_checkpoint": owo_name });
+            (Box::new(tat), value)
+        }
+    };
+    eprintln!("{name}: {} parameters", codec.params().count());
+    let settings = train::CodecTraining {
+        steps: args.steps,
+        lr: args.lr,
+        warmup: 200.min(args.steps / 10),
+        seed: args.common.seed,
+        batch_size: args.batch_size,
+        max_batch_joints: 16 * 24,
+    };
+    let run = run_dir(&args.common, &name)?;
+    let motions = train_clips.iter().map(|c| c.motion.clone()).collect();
+    let mut graph_of = |s: &Skeleton| -> Result<SkeletonGraph> { Ok(SkeletonGraph::new(s, &mut encoder)?) };
+    let state = train::train_codec(codec.as_mut(), motions, &mut graph_of, &settings, &run)?;
+    let card = ModelCard {
+        model: name.clone(),
+        config: {
+            let mut c = config;
+            c["training"] = serde_json::to_value(&settings)?;
+            c
+        },
+        data: data::data_record(&args.common.manifest, &train_clips),
+        steps: state.step,
+        metrics: serde_json::json!({ "train_seconds": state.seconds }),
+        command: command_line(),
+    };
+    train::ship(codec.params(), &card, &args.common.out_dir, &name)?;
+    eprintln!("wrote {}", args.common.out_dir.join(format!("{name}.safetensors")).display());
+    Ok(())
+}

@@ -1,0 +1,9 @@
+//! Training, evaluation and use of anymo's motion models: data from a manifest, the training
+//! loops with resumable checkpoints, the evaluation protocol of EVAL.md and the shipped
+//! checkpoints.
+
+pub mod codecs;
+pub mod data;
+pub mod evaluate;
+pub mod shipped;
+pub mod train;

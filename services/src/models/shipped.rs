@@ -1,0 +1,54 @@
+//! The checkpoints anymo ships and loads: where they live and how a trained tokenizer is rebuilt
+//! from its weights and model card.
+
+use anyhow::{Context, Result, bail};
+use anymo_tokenizer::nn::{ModelCard, Params, load_card};
+use anymo_tokenizer::owo::graph::GLOBAL_NODE_TEXT;
+use anymo_tokenizer::tat::{Codec, Tat, TokenizerConfig};
+use anymo_tokenizer::text::CachedEncoder;
+use std::path::{Path, PathBuf};
+
+/// The shipped checkpoints' folder: `$ANYMO_CHECKPOINTS`, else the repository's
+/// `tokenizer/checkpoints`.
+pub fn default_dir() -> PathBuf {
+    match std::env::var_os("ANYMO_CHECKPOINTS") {
+        Some(dir) => PathBuf::from(dir),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../tokenizer/checkpoints"),
+    }
+}
+
+/// Weights and card of a named checkpoint in `dir`.
+pub fn files(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+    (dir.join(format!("{name}.safetensors")), dir.join(format!("{name}.json")))
+}
+
+/// Reads a checkpoint's model card, with an error that says how to get the checkpoint.
+pub fn card(dir: &Path, name: &str) -> Result<ModelCard> {
+    let (weights, card) = files(dir, name);
+    if !weights.exists() || !card.exists() {
+        bail!(
+            "checkpoint {name} not found in {} (a clean clone ships it in tokenizer/checkpoints; train one with `anymo train {}`)",
+            dir.display(),
+            if name == "owo" { "owo" } else { "tokenizer" }
+        );
+    }
+    Ok(load_card(&card)?)
+}
+
+/// Loads a trained TAT (`name`, usually `tat`) and the OwO it was trained over.
+pub fn load_tat(dir: &Path, name: &str, encoder: &mut CachedEncoder) -> Result<(Tat, ModelCard)> {
+    let card = card(dir, name)?;
+    let config: TokenizerConfig = serde_json::from_value(card.config["tokenizer"].clone())
+        .with_context(|| format!("model card of {name} has no tokenizer configuration"))?;
+    let owo_name = card.config["owo_checkpoint"].as_str().unwrap_or("owo").to_string();
+    let global = encoder.encode(&[GLOBAL_NODE_TEXT])?.remove(0);
+    let mut owo_params = Params::new(0);
+    let mut tat = Tat::new(config, 0, &mut owo_params, global)?;
+    if owo_name != "random" {
+        let (owo_weights, _) = files(dir, &owo_name);
+        owo_params.load(&owo_weights).with_context(|| format!("loading {}", owo_weights.display()))?;
+    }
+    let rest = tat.params_mut().load(&files(dir, name).0)?;
+    tat.restore_buffers(&rest)?;
+    Ok((tat, card))
+}

@@ -1,0 +1,274 @@
+//! The training loops: OwO pretraining and tokenizer (TAT or baseline) training, with a progress
+//! bar, checkpoints every few minutes and exact resumption after a kill.
+
+use anyhow::{Context, Result};
+use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
+use anymo_tokenizer::motion::Motion;
+use anymo_tokenizer::nn::{AdamW, AdamWConfig, ModelCard, Params};
+use anymo_tokenizer::owo::SkeletonGraph;
+use anymo_tokenizer::owo::pretrain::{Pretrainer, schedule};
+use anymo_tokenizer::tat::Codec;
+use anymo_tokenizer::tat::objective::{LossParts, Prepared, loss};
+use anymo_tokenizer::text::CachedEncoder;
+use candle_core::Tensor;
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Where a run keeps its resumable state, apart from the checkpoint it ships.
+pub struct RunDir {
+    dir: PathBuf,
+}
+
+/// What a run has done so far.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct RunState {
+    /// Optimiser steps taken.
+    pub step: u64,
+    /// Loader epoch in progress.
+    pub epoch: u64,
+    /// Batches of that epoch already used.
+    pub batch: usize,
+    /// Seconds spent training so far.
+    pub seconds: f64,
+}
+
+impl RunDir {
+    /// A run directory (created when missing).
+    pub fn new(dir: &Path) -> Result<RunDir> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(RunDir { dir: dir.to_path_buf() })
+    }
+
+    /// The saved state, if the run was started before.
+    pub fn state(&self) -> Result<Option<RunState>> {
+        let path = self.dir.join("state.json");
+        if !path.exists() {
+            return Ok(None);
+        }
+        let text = std::fs::read_to_string(&path)?;
+        Ok(Some(serde_json::from_str(&text).with_context(|| format!("reading {}", path.display()))?))
+    }
+
+    /// Restores parameters and optimiser from the run's last save; returns the saved buffers.
+    pub fn restore(&self, params: &mut Params, optimiser: &mut AdamW) -> Result<HashMap<String, Tensor>> {
+        let rest = params.load(&self.dir.join("params.safetensors")).context("loading the run's parameters")?;
+        optimiser.load(&self.dir.join("optimiser.safetensors")).context("loading the run's optimiser state")?;
+        Ok(rest)
+    }
+
+    /// Saves parameters, optimiser and state; the state file is written last and renamed into
+    /// place, so a kill mid-save leaves the previous save usable.
+    pub fn save(&self, params: &Params, optimiser: &AdamW, state: &RunState) -> Result<()> {
+        let tmp = |name: &str| self.dir.join(format!("{name}.tmp"));
+        params.save(&tmp("params.safetensors"))?;
+        optimiser.save(&tmp("optimiser.safetensors"))?;
+        std::fs::write(tmp("state.json"), serde_json::to_string_pretty(state)?)?;
+        for name in ["params.safetensors", "optimiser.safetensors", "state.json"] {
+            std::fs::rename(tmp(name), self.dir.join(name))?;
+        }
+        Ok(())
+    }
+}
+
+/// Logs a progress line now and then when stderr is not a terminal (a background run's log).
+struct LogLines {
+    last: Instant,
+    enabled: bool,
+}
+
+impl LogLines {
+    fn new() -> LogLines {
+        use std::io::IsTerminal;
+        LogLines { last: Instant::now(), enabled: !std::io::stderr().is_terminal() }
+    }
+
+    fn maybe(&mut self, step: u64, total: u64, message: &str) {
+        if self.enabled && (self.last.elapsed() >= Duration::from_secs(30) || step == total) {
+            eprintln!("step {step}/{total} {message}");
+            self.last = Instant::now();
+        }
+    }
+}
+
+fn progress(total: u64, start: u64) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps  {per_sec}  eta {eta}  {msg}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_position(start);
+    bar
+}
+
+/// How often a run saves its state.
+pub const SAVE_EVERY: Duration = Duration::from_secs(120);
+
+/// Pretrains OwO for `pretrainer`'s configured steps, resuming from `run` when it holds a state.
+pub fn pretrain_owo(
+    pretrainer: &mut Pretrainer,
+    steps: u64,
+    encoder: &mut CachedEncoder,
+    run: &RunDir,
+) -> Result<RunState> {
+    let mut optimiser = AdamW::new(&pretrainer.params, AdamWConfig::default())?;
+    let mut state = RunState::default();
+    if let Some(saved) = run.state()? {
+        run.restore(&mut pretrainer.params, &mut optimiser)?;
+        state = saved;
+        eprintln!("resuming OwO pretraining at step {}", state.step);
+    }
+    let bar = progress(steps, state.step);
+    let mut log = LogLines::new();
+    let mut last_save = Instant::now();
+    let started = Instant::now() - Duration::from_secs_f64(state.seconds);
+    while state.step < steps {
+        let (total, parts, scores) = pretrainer.step_losses(state.step, encoder)?;
+        let grads = total.backward()?;
+        optimiser.step(&pretrainer.params, &grads, pretrainer.learning_rate(state.step))?;
+        state.step += 1;
+        state.seconds = started.elapsed().as_secs_f64();
+        bar.set_position(state.step);
+        let message = format!(
+            "offset {:.4} lca {:.3} label {:.3} | lca acc {:.2} label acc {:.2}",
+            parts[0], parts[1], parts[2], scores.lca_accuracy, scores.label_accuracy
+        );
+        log.maybe(state.step, steps, &message);
+        bar.set_message(message);
+        if last_save.elapsed() >= SAVE_EVERY || state.step == steps {
+            run.save(&pretrainer.params, &optimiser, &state)?;
+            last_save = Instant::now();
+        }
+    }
+    bar.finish();
+    Ok(state)
+}
+
+/// Settings of a tokenizer training run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CodecTraining {
+    /// Optimiser steps.
+    pub steps: u64,
+    /// Peak learning rate.
+    pub lr: f64,
+    /// Warm-up steps.
+    pub warmup: u64,
+    /// Seed of sampling (initialisation has its own in the model).
+    pub seed: u64,
+    /// Windows per batch (fewer for large skeletons).
+    pub batch_size: usize,
+    /// Joints over all windows of a batch, at most.
+    pub max_batch_joints: usize,
+}
+
+/// Running means of the loss terms, for the progress bar.
+#[derive(Default)]
+struct Running {
+    parts: LossParts,
+    n: f32,
+}
+
+impl Running {
+    fn add(&mut self, p: &LossParts) {
+        let k = 1.0 / (self.n + 1.0).min(50.0);
+        let mix = |a: &mut f32, b: f32| *a += (b - *a) * k;
+        mix(&mut self.parts.rotation, p.rotation);
+        mix(&mut self.parts.position, p.position);
+        mix(&mut self.parts.root, p.root);
+        mix(&mut self.parts.velocity, p.velocity);
+        mix(&mut self.parts.commitment, p.commitment);
+        self.n += 1.0;
+    }
+}
+
+/// Trains a codec on windows of `clips`; `graphs[g]` is the skeleton graph of loader group `g`.
+pub fn train_codec(
+    codec: &mut dyn Codec,
+    clips: Vec<Motion>,
+    graph_of: &mut dyn FnMut(&anymo_tokenizer::skeleton::Skeleton) -> Result<SkeletonGraph>,
+    settings: &CodecTraining,
+    run: &RunDir,
+) -> Result<RunState> {
+    let mut optimiser = AdamW::new(codec.params(), AdamWConfig::default())?;
+    let mut state = RunState::default();
+    if let Some(saved) = run.state()? {
+        let rest = run.restore(codec.params_mut(), &mut optimiser)?;
+        codec.restore_buffers(&rest)?;
+        state = saved;
+        eprintln!("resuming at step {} (epoch {}, batch {})", state.step, state.epoch, state.batch);
+    }
+    let config = LoaderConfig {
+        batch_size: settings.batch_size,
+        max_batch_joints: settings.max_batch_joints,
+        seed: settings.seed,
+        ..LoaderConfig::default()
+    };
+    let mut loader = WindowLoader::new(clips, config);
+    let graphs: Vec<SkeletonGraph> =
+        (0..loader.groups()).map(|g| graph_of(loader.group_skeleton(g))).collect::<Result<_>>()?;
+    let bar = progress(settings.steps, state.step);
+    let mut log = LogLines::new();
+    let mut last_save = Instant::now();
+    let started = Instant::now() - Duration::from_secs_f64(state.seconds);
+    let mut running = Running::default();
+    let mut frames = 0usize;
+    let window_start = Instant::now();
+    'training: while state.step < settings.steps {
+        loader.reseed(settings.seed.wrapping_add(state.epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
+        let batches = loader.epoch()?;
+        for (index, batch) in batches.iter().enumerate().skip(state.batch) {
+            let prepared = Prepared::new(batch, codec.root_stats())?;
+            let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ state.step.wrapping_mul(0x2545_F491_4F6C_DD1D));
+            let out = codec.reconstruct(&prepared, &graphs[batch.group], true, &mut rng)?;
+            let (total, parts) =
+                loss(&out.prediction, &prepared, codec.root_stats(), &out.commitment, codec.weights())?;
+            let grads = total.backward()?;
+            optimiser.step(
+                codec.params(),
+                &grads,
+                schedule(settings.lr, settings.warmup, settings.steps, state.step),
+            )?;
+            running.add(&parts);
+            frames += batch.sources.len() * batch.rotations.dim(1)?;
+            state.step += 1;
+            state.batch = index + 1;
+            state.seconds = started.elapsed().as_secs_f64();
+            bar.set_position(state.step);
+            let fps = frames as f64 / window_start.elapsed().as_secs_f64();
+            let r = &running.parts;
+            let message = format!(
+                "rot {:.4} pos {:.5} root {:.3} vel {:.6} commit {:.4} | {fps:.0} frames/s",
+                r.rotation, r.position, r.root, r.velocity, r.commitment
+            );
+            log.maybe(state.step, settings.steps, &message);
+            bar.set_message(message);
+            if last_save.elapsed() >= SAVE_EVERY || state.step == settings.steps {
+                codec.sync_buffers()?;
+                run.save(codec.params(), &optimiser, &state)?;
+                last_save = Instant::now();
+            }
+            if state.step >= settings.steps {
+                break 'training;
+            }
+        }
+        state.epoch += 1;
+        state.batch = 0;
+    }
+    codec.sync_buffers()?;
+    run.save(codec.params(), &optimiser, &state)?;
+    bar.finish();
+    Ok(state)
+}
+
+/// Writes a shipped checkpoint: weights and model card side by side.
+pub fn ship(params: &Params, card: &ModelCard, dir: &Path, name: &str) -> Result<()> {
+    std::fs::create_dir_all(dir)?;
+    params.save(&dir.join(format!("{name}.safetensors")))?;
+    card.save(&dir.join(format!("{name}.json")))?;
+    Ok(())
+}
