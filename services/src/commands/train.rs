@@ -50,6 +50,9 @@ struct Common {
     /// Seed of initialisation and sampling.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Seconds between saves of the resumable run state.
+    #[arg(long, default_value_t = 120)]
+    save_every: u64,
     #[command(flatten)]
     store: StoreArgs,
 }
@@ -154,7 +157,8 @@ fn owo(args: OwoArgs) -> Result<()> {
     let config = PretrainConfig { steps: args.steps, seed: args.common.seed, ..PretrainConfig::default() };
     let mut pretrainer = Pretrainer::new(config.clone(), train_skeletons.clone(), &mut encoder)?;
     let run = run_dir(&args.common, "owo")?;
-    let state = train::pretrain_owo(&mut pretrainer, args.steps, &mut encoder, &run)?;
+    let save_every = std::time::Duration::from_secs(args.common.save_every);
+    let state = train::pretrain_owo(&mut pretrainer, args.steps, &mut encoder, &run, save_every)?;
     let zero = pretrainer.evaluate(&zero_shot, false, &mut encoder)?;
     let zero_hidden = pretrainer.evaluate(&zero_shot, true, &mut encoder)?;
     let seen = pretrainer.evaluate(&train_skeletons, false, &mut encoder)?;
@@ -235,6 +239,7 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         seed: args.common.seed,
         batch_size: args.batch_size,
         max_batch_joints: 16 * 24,
+        save_every_seconds: args.common.save_every,
     };
     let run = run_dir(&args.common, &name)?;
     let motions = train_clips.iter().map(|c| c.motion.clone()).collect();

@@ -106,15 +106,14 @@ fn progress(total: u64, start: u64) -> ProgressBar {
     bar
 }
 
-/// How often a run saves its state.
-pub const SAVE_EVERY: Duration = Duration::from_secs(120);
-
-/// Pretrains OwO for `pretrainer`'s configured steps, resuming from `run` when it holds a state.
+/// Pretrains OwO for `pretrainer`'s configured steps, resuming from `run` when it holds a state
+/// and saving it every `save_every`.
 pub fn pretrain_owo(
     pretrainer: &mut Pretrainer,
     steps: u64,
     encoder: &mut CachedEncoder,
     run: &RunDir,
+    save_every: Duration,
 ) -> Result<RunState> {
     let mut optimiser = AdamW::new(&pretrainer.params, AdamWConfig::default())?;
     let mut state = RunState::default();
@@ -140,7 +139,7 @@ pub fn pretrain_owo(
         );
         log.maybe(state.step, steps, &message);
         bar.set_message(message);
-        if last_save.elapsed() >= SAVE_EVERY || state.step == steps {
+        if last_save.elapsed() >= save_every || state.step == steps {
             run.save(&pretrainer.params, &optimiser, &state)?;
             last_save = Instant::now();
         }
@@ -164,6 +163,8 @@ pub struct CodecTraining {
     pub batch_size: usize,
     /// Joints over all windows of a batch, at most.
     pub max_batch_joints: usize,
+    /// Seconds between saves of the run state.
+    pub save_every_seconds: u64,
 }
 
 /// Running means of the loss terms, for the progress bar.
@@ -247,7 +248,7 @@ pub fn train_codec(
             );
             log.maybe(state.step, settings.steps, &message);
             bar.set_message(message);
-            if last_save.elapsed() >= SAVE_EVERY || state.step == settings.steps {
+            if last_save.elapsed() >= Duration::from_secs(settings.save_every_seconds) || state.step == settings.steps {
                 codec.sync_buffers()?;
                 run.save(codec.params(), &optimiser, &state)?;
                 last_save = Instant::now();

@@ -8,10 +8,11 @@
 
 pub mod adamw;
 pub mod checkpoint;
+pub mod flops;
 pub mod layers;
 pub mod params;
 
 pub use adamw::{AdamW, AdamWConfig};
 pub use checkpoint::{CardError, DataRecord, ModelCard, load_card};
-pub use layers::{Attention, FeedForward, LayerNorm, Linear, TransformerLayer};
+pub use layers::{Activation, Attention, FeedForward, LayerNorm, Linear, TransformerLayer};
 pub use params::Params;

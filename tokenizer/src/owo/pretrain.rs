@@ -225,10 +225,9 @@ fn label_retrieval(sim: &Tensor, batch: &GraphBatch, targets: &Targets) -> Resul
     let mut offset = 0;
     let (mut right, mut total) = (0usize, 0usize);
     for &(_, joints) in &batch.ranges {
-        for i in offset..offset + joints {
-            let best = (offset..offset + joints)
-                .max_by(|&a, &b| sim[i][a].total_cmp(&sim[i][b]))
-                .expect("a skeleton has joints");
+        for (i, row) in sim.iter().enumerate().skip(offset).take(joints) {
+            let best =
+                (offset..offset + joints).max_by(|&a, &b| row[a].total_cmp(&row[b])).expect("a skeleton has joints");
             right += usize::from(targets.labels[best] == targets.labels[i]);
             total += 1;
         }

@@ -79,7 +79,7 @@ impl Modulation {
 
     /// `x (B, T, J, d)`, `condition (B, J, c)`.
     fn forward(&self, x: &Tensor, condition: &Tensor) -> Result<Tensor> {
-        let c = self.condition.forward(condition)?.gelu()?;
+        let c = self.condition.forward(condition)?.relu()?;
         match &self.film {
             None => x.broadcast_add(&c.unsqueeze(1)?),
             Some(film) => {

@@ -1,0 +1,223 @@
+//! The model commands end to end on a small sample of the real corpus: a tiny OwO pretraining,
+//! tokenizer and baseline trainings (one of them killed and resumed, which must end exactly
+//! where an uninterrupted run ends), the evaluation, and tokenize / detokenize / transfer on real
+//! files with the output keeping the target's hierarchy.
+
+use anymo_tests::{data_dir, scratch_dir};
+use anymo_tokenizer::bvh::{self, ReadOptions};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn models() -> Option<PathBuf> {
+    let models = std::env::var_os("ANYMO_MODELS")
+        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models"), PathBuf::from);
+    if models.join("all-MiniLM-L6-v2/model.safetensors").is_file() {
+        Some(models)
+    } else {
+        eprintln!("skipping: no sentence encoder in {} (bash tools/setup.sh)", models.display());
+        None
+    }
+}
+
+fn anymo(models: &Path, args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_anymo"));
+    c.args(args).env("ANYMO_MODELS", models).env("RAYON_NUM_THREADS", "1");
+    c
+}
+
+fn ok(out: Output) -> Output {
+    assert!(out.status.success(), "anymo failed: {}", String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+fn strs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+fn tensors(path: &Path) -> Vec<(String, Vec<f32>)> {
+    let mut all: Vec<(String, Vec<f32>)> = candle_core::safetensors::load(path, &candle_core::Device::Cpu)
+        .unwrap()
+        .into_iter()
+        .map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1().unwrap()))
+        .collect();
+    all.sort_by(|a, b| a.0.cmp(&b.0));
+    all
+}
+
+/// A joint as the output must keep it: name, parent, offset, channels.
+type JointShape = (String, Option<usize>, [f32; 3], Vec<String>);
+
+fn hierarchy(path: &Path) -> Vec<JointShape> {
+    let clip = bvh::read_path(path, ReadOptions::default()).unwrap();
+    clip.skeleton()
+        .joints()
+        .iter()
+        .map(|j| {
+            (
+                j.name.clone(),
+                j.parent,
+                j.offset.to_array(),
+                j.channels.as_slice().iter().map(|c| format!("{c:?}")).collect(),
+            )
+        })
+        .collect()
+}
+
+fn gunzip(from: &Path, to: &Path) {
+    use std::io::Read;
+    let mut text = Vec::new();
+    flate2::read::MultiGzDecoder::new(std::fs::File::open(from).unwrap()).read_to_end(&mut text).unwrap();
+    std::fs::write(to, text).unwrap();
+}
+
+#[test]
+fn tiny_training_resumes_exactly_evaluates_and_transfers() {
+    let (Some(shared), Some(models)) = (data_dir(), models()) else { return };
+    let dir = scratch_dir("models");
+    let manifest = shared.join("manifest.tsv");
+    let (manifest, ck) = (manifest.to_str().unwrap(), dir.join("ck"));
+    let ck = ck.to_str().unwrap();
+    let run = |name: &str| dir.join("runs").join(name).to_string_lossy().into_owned();
+    let common = |name: &str| -> Vec<String> {
+        ["--manifest", manifest, "--limit", "6", "--out-dir", ck, "--run-dir", &run(name)].map(String::from).to_vec()
+    };
+    let with = |base: Vec<String>, more: &[&str]| -> Vec<String> {
+        base.into_iter().chain(more.iter().map(|s| s.to_string())).collect()
+    };
+
+    let owo = with(with(vec!["train".into(), "owo".into()], &strs(&common("owo"))), &["--steps", "3"]);
+    ok(anymo(&models, &strs(&owo)).output().unwrap());
+    let card: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ck/owo.json")).unwrap()).unwrap();
+    assert_eq!(card["steps"], 3);
+    assert!(card["metrics"]["zero_shot_skeletons"]["lca_accuracy"].as_f64().is_some());
+
+    // The same tiny TAT run twice: once straight through, once killed after a saved step.
+    let tat = |name: &str| {
+        with(
+            with(vec!["train".into(), "tokenizer".into()], &strs(&common(name))),
+            &["--variant", "tat", "--name", name, "--steps", "6", "--batch-size", "4", "--save-every", "0"],
+        )
+    };
+    ok(anymo(&models, &strs(&tat("straight"))).output().unwrap());
+    let mut child = anymo(&models, &strs(&tat("killed"))).stderr(std::process::Stdio::null()).spawn().unwrap();
+    let state = dir.join("runs/killed/state.json");
+    let started = Instant::now();
+    loop {
+        let step = std::fs::read_to_string(&state)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["step"].as_u64())
+            .unwrap_or(0);
+        if step >= 2 || started.elapsed() > Duration::from_secs(600) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let resumed = ok(anymo(&models, &strs(&tat("killed"))).output().unwrap());
+    assert!(String::from_utf8_lossy(&resumed.stderr).contains("resuming at step"), "the second run resumed");
+    let (a, b) = (tensors(&dir.join("ck/straight.safetensors")), tensors(&dir.join("ck/killed.safetensors")));
+    assert_eq!(a.len(), b.len());
+    for ((na, va), (nb, vb)) in a.iter().zip(&b) {
+        assert_eq!(na, nb);
+        assert!(va == vb, "{na} differs between the straight and the resumed run");
+    }
+
+    let baseline = with(
+        with(vec!["train".into(), "tokenizer".into()], &strs(&common("baseline"))),
+        &["--variant", "baseline", "--steps", "3", "--batch-size", "4"],
+    );
+    ok(anymo(&models, &strs(&baseline)).output().unwrap());
+    let results = dir.join("eval.json");
+    ok(anymo(
+        &models,
+        &[
+            "eval",
+            "tokenizer",
+            "--manifest",
+            manifest,
+            "--limit",
+            "3",
+            "--dir",
+            ck,
+            "--models",
+            "straight,baseline",
+            "--json",
+            results.to_str().unwrap(),
+        ],
+    )
+    .output()
+    .unwrap());
+    let results: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&results).unwrap()).unwrap();
+    for model in ["straight", "baseline"] {
+        for split in ["test", "zero-shot"] {
+            let m = &results[model][split];
+            assert_eq!(m["clips"], 3, "{model} {split}");
+            let mpjpe = m["mpjpe"].as_f64().unwrap();
+            assert!(mpjpe.is_finite() && mpjpe > 0.0, "{model} {split}: {mpjpe}");
+        }
+    }
+
+    // Tokens and transfer with the tiny checkpoint: the output keeps the target's hierarchy.
+    let source = dir.join("walk.bvh");
+    gunzip(&shared.join("bandai/dataset-1/dataset-1_walk_normal_001.bvh.gz"), &source);
+    let horse_gz = anymo_tests::files_with_suffix(&shared.join("quaternius/bvh"), ".bvh.gz")
+        .into_iter()
+        .find(|p| p.to_string_lossy().contains("Horse"))
+        .expect("a horse clip");
+    let horse = dir.join("horse.bvh");
+    gunzip(&horse_gz, &horse);
+    let tokens = dir.join("walk.tokens.json");
+    let model = ["--checkpoints", ck, "--model", "straight"];
+    ok(anymo(
+        &models,
+        &strs(&with(
+            vec!["tokenize".into(), source.to_string_lossy().into(), "-o".into(), tokens.to_string_lossy().into()],
+            &model,
+        )),
+    )
+    .output()
+    .unwrap());
+    let file: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&tokens).unwrap()).unwrap();
+    let frames = file["tokens"]["frames"].as_u64().unwrap() as usize;
+    let steps: usize = file["tokens"]["codes"].as_array().unwrap().iter().map(|w| w.as_array().unwrap().len()).sum();
+    assert_eq!(steps, 16 * file["tokens"]["starts"].as_array().unwrap().len(), "16 token steps per 64-frame window");
+    let back = dir.join("walk.back.bvh");
+    let detok = with(
+        vec![
+            "detokenize".into(),
+            tokens.to_string_lossy().into(),
+            "--skeleton".into(),
+            source.to_string_lossy().into(),
+            "-o".into(),
+            back.to_string_lossy().into(),
+        ],
+        &model,
+    );
+    ok(anymo(&models, &strs(&detok)).output().unwrap());
+    assert_eq!(hierarchy(&back), hierarchy(&source));
+    assert_eq!(bvh::read_path(&back, ReadOptions::default()).unwrap().frames(), frames);
+    let moved = dir.join("walk.horse.bvh");
+    let transfer = with(
+        vec![
+            "transfer".into(),
+            source.to_string_lossy().into(),
+            "--to".into(),
+            horse.to_string_lossy().into(),
+            "-o".into(),
+            moved.to_string_lossy().into(),
+        ],
+        &model,
+    );
+    ok(anymo(&models, &strs(&transfer)).output().unwrap());
+    assert_eq!(hierarchy(&moved), hierarchy(&horse));
+
+    // Tokens that do not fit the checkpoint are refused with a reason.
+    std::fs::write(&tokens, std::fs::read_to_string(&tokens).unwrap().replacen("[[[", "[[[99999,", 1)).unwrap();
+    let refused = anymo(&models, &strs(&detok)).output().unwrap();
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("do not fit checkpoint"));
+}
