@@ -19,6 +19,19 @@ pub fn data_dir() -> Option<PathBuf> {
     }
 }
 
+/// The sentence encoder's folder (`$ANYMO_MODELS`, else `anymo-data/models` in the workspace),
+/// if the model is there.
+pub fn models_dir() -> Option<PathBuf> {
+    let models = std::env::var_os("ANYMO_MODELS")
+        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models"), PathBuf::from);
+    if models.join("all-MiniLM-L6-v2/model.safetensors").is_file() {
+        Some(models)
+    } else {
+        eprintln!("skipping: no sentence encoder in {} (bash tools/setup.sh)", models.display());
+        None
+    }
+}
+
 /// Every file below `dir` whose name ends with `suffix`, sorted.
 pub fn files_with_suffix(dir: &Path, suffix: &str) -> Vec<PathBuf> {
     let mut out = Vec::new();

@@ -2,21 +2,10 @@
 //! stored: running it again completes with exactly the store an uninterrupted run makes.
 
 use anymo_services::store::Store;
-use anymo_tests::{data_dir, files_with_suffix, scratch_dir};
-use std::path::{Path, PathBuf};
+use anymo_tests::{data_dir, files_with_suffix, models_dir, scratch_dir};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn models() -> Option<PathBuf> {
-    let models = std::env::var_os("ANYMO_MODELS")
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models"), PathBuf::from);
-    if models.join("all-MiniLM-L6-v2/model.safetensors").is_file() {
-        Some(models)
-    } else {
-        eprintln!("skipping: no sentence encoder in {} (bash tools/setup.sh)", models.display());
-        None
-    }
-}
 
 fn ingest(folder: &Path, data: &Path, models: &Path) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_anymo"));
@@ -42,7 +31,7 @@ fn dump(data: &Path) -> Vec<String> {
 
 #[test]
 fn a_killed_ingest_resumes_to_the_same_store() {
-    let (Some(shared), Some(models)) = (data_dir(), models()) else { return };
+    let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
     // A folder of links to every 4th BVH clip of the corpus.
     let folder = scratch_dir("kill-input");
     for file in files_with_suffix(&shared, ".bvh.gz").iter().step_by(4) {

@@ -3,22 +3,11 @@
 //! where an uninterrupted run ends), the evaluation, and tokenize / detokenize / transfer on real
 //! files with the output keeping the target's hierarchy.
 
-use anymo_tests::{data_dir, scratch_dir};
+use anymo_tests::{data_dir, models_dir, scratch_dir};
 use anymo_tokenizer::bvh::{self, ReadOptions};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
-
-fn models() -> Option<PathBuf> {
-    let models = std::env::var_os("ANYMO_MODELS")
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models"), PathBuf::from);
-    if models.join("all-MiniLM-L6-v2/model.safetensors").is_file() {
-        Some(models)
-    } else {
-        eprintln!("skipping: no sentence encoder in {} (bash tools/setup.sh)", models.display());
-        None
-    }
-}
 
 fn anymo(models: &Path, args: &[&str]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_anymo"));
@@ -73,7 +62,7 @@ fn gunzip(from: &Path, to: &Path) {
 
 #[test]
 fn tiny_training_resumes_exactly_evaluates_and_transfers() {
-    let (Some(shared), Some(models)) = (data_dir(), models()) else { return };
+    let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
     let dir = scratch_dir("models");
     let manifest = shared.join("manifest.tsv");
     let (manifest, ck) = (manifest.to_str().unwrap(), dir.join("ck"));

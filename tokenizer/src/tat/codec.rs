@@ -24,6 +24,14 @@ pub struct Reconstruction {
     pub codes: Vec<Vec<u32>>,
 }
 
+/// What every codec trains and saves: its parameters, its quantiser, and what its loss reads.
+pub struct Trained {
+    params: Params,
+    rvq: Rvq,
+    root: RootStats,
+    weights: LossWeights,
+}
+
 /// A trainable motion tokenizer.
 pub trait Codec {
     /// Encodes, quantises and decodes a batch of one skeleton (`graph` names its joints).
@@ -34,18 +42,35 @@ pub trait Codec {
         training: bool,
         rng: &mut dyn rand::RngCore,
     ) -> Result<Reconstruction>;
+    /// The trained state.
+    fn trained(&self) -> &Trained;
+    /// The trained state, mutable.
+    fn trained_mut(&mut self) -> &mut Trained;
     /// The trainable parameters (with buffers such as codebooks).
-    fn params(&self) -> &Params;
+    fn params(&self) -> &Params {
+        &self.trained().params
+    }
     /// Mutable access, for loading.
-    fn params_mut(&mut self) -> &mut Params;
+    fn params_mut(&mut self) -> &mut Params {
+        &mut self.trained_mut().params
+    }
     /// Copies non-gradient state (codebooks) into the parameter buffers before saving.
-    fn sync_buffers(&mut self) -> Result<()>;
+    fn sync_buffers(&mut self) -> Result<()> {
+        let t = self.trained_mut();
+        t.rvq.save_into(&mut t.params, "rvq")
+    }
     /// Restores non-gradient state from the tensors loading the parameters left over.
-    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()>;
+    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        self.trained_mut().rvq.load_from(tensors, "rvq")
+    }
     /// Root statistics the codec normalises with.
-    fn root_stats(&self) -> &RootStats;
+    fn root_stats(&self) -> &RootStats {
+        &self.trained().root
+    }
     /// Loss weights.
-    fn weights(&self) -> &LossWeights;
+    fn weights(&self) -> &LossWeights {
+        &self.trained().weights
+    }
 }
 
 /// Everything that defines a TAT checkpoint.
@@ -98,10 +123,9 @@ impl TokenizerConfig {
 /// TAT: the topology-agnostic tokenizer with its frozen OwO.
 pub struct Tat {
     config: TokenizerConfig,
-    params: Params,
+    trained: Trained,
     encoder: Encoder,
     decoder: Decoder,
-    rvq: Rvq,
     owo: Owo,
     global_text: Vec<f32>,
 }
@@ -114,7 +138,8 @@ impl Tat {
         let encoder = Encoder::new(&mut params, &config.tat, config.rvq.dim)?;
         let decoder = Decoder::new(&mut params, &config.tat, config.rvq.dim)?;
         let rvq = Rvq::new(config.rvq);
-        Ok(Tat { config, params, encoder, decoder, rvq, owo, global_text })
+        let trained = Trained { params, rvq, root: config.root, weights: config.weights };
+        Ok(Tat { config, trained, encoder, decoder, owo, global_text })
     }
 
     /// The configuration.
@@ -149,13 +174,13 @@ impl Tat {
     pub fn encode(&mut self, input: &Tensor, condition: &Tensor) -> Result<Vec<Vec<u32>>> {
         let latent = self.encoder.forward(input, condition)?;
         let (b, t, c) = latent.dims3()?;
-        let q = self.rvq.forward(&latent.reshape((b * t, c))?, false, &mut rand::rng())?;
+        let q = self.trained.rvq.forward(&latent.reshape((b * t, c))?, false, &mut rand::rng())?;
         Ok(q.codes)
     }
 
     /// Decodes codes `(B * T', layers)` for `B` windows onto the skeleton of `condition`.
     pub fn decode(&self, codes: &[Vec<u32>], windows: usize, condition: &Tensor) -> Result<Prediction> {
-        let latent = self.rvq.decode(codes)?;
+        let latent = self.trained.rvq.decode(codes)?;
         let t = codes.len() / windows;
         let out = self.decoder.forward(&latent.reshape((windows, t, self.config.rvq.dim))?, condition)?;
         split_output(&out)
@@ -184,27 +209,15 @@ impl Codec for Tat {
         let condition = self.condition(graph, &batch.offsets)?;
         let latent = self.encoder.forward(&batch.input, &condition)?;
         let (b, t, c) = latent.dims3()?;
-        let q = self.rvq.forward(&latent.reshape((b * t, c))?, training, rng)?;
+        let q = self.trained.rvq.forward(&latent.reshape((b * t, c))?, training, rng)?;
         let out = self.decoder.forward(&q.latent.reshape((b, t, c))?, &condition)?;
         Ok(Reconstruction { prediction: split_output(&out)?, commitment: q.commitment, codes: q.codes })
     }
-    fn params(&self) -> &Params {
-        &self.params
+    fn trained(&self) -> &Trained {
+        &self.trained
     }
-    fn params_mut(&mut self) -> &mut Params {
-        &mut self.params
-    }
-    fn sync_buffers(&mut self) -> Result<()> {
-        self.rvq.save_into(&mut self.params, "rvq")
-    }
-    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        self.rvq.load_from(tensors, "rvq")
-    }
-    fn root_stats(&self) -> &RootStats {
-        &self.config.root
-    }
-    fn weights(&self) -> &LossWeights {
-        &self.config.weights
+    fn trained_mut(&mut self) -> &mut Trained {
+        &mut self.trained
     }
 }
 
@@ -229,7 +242,7 @@ pub struct BaselineConfig {
 /// a 1-D convolutional encoder and decoder, the same RVQ and losses as TAT.
 pub struct Baseline {
     config: BaselineConfig,
-    params: Params,
+    trained: Trained,
     input: Linear,
     down: Vec<(Downsample, ResBlock, ResBlock)>,
     norm: LayerNorm,
@@ -237,7 +250,6 @@ pub struct Baseline {
     from_code: Linear,
     up: Vec<(ResBlock, ResBlock, Upsample)>,
     output: Linear,
-    rvq: Rvq,
 }
 
 impl Baseline {
@@ -270,7 +282,8 @@ impl Baseline {
             .collect::<Result<_>>()?;
         let output = Linear::with_std(&mut p, "output", d, frame, true, 0.01)?;
         let rvq = Rvq::new(config.rvq);
-        Ok(Baseline { config, params: p, input, down, norm, to_code, from_code, up, output, rvq })
+        let trained = Trained { params: p, rvq, root: config.root, weights: config.weights };
+        Ok(Baseline { config, trained, input, down, norm, to_code, from_code, up, output })
     }
 
     /// The configuration.
@@ -306,7 +319,7 @@ impl Codec for Baseline {
         }
         let latent = self.to_code.forward(&self.norm.forward(&h)?)?;
         let (_, tq, c) = latent.dims3()?;
-        let q = self.rvq.forward(&latent.reshape((b * tq, c))?, training, rng)?;
+        let q = self.trained.rvq.forward(&latent.reshape((b * tq, c))?, training, rng)?;
         let mut h = self.from_code.forward(&q.latent.reshape((b, tq, c))?)?;
         for (r0, r1, up) in &self.up {
             h = up.forward(&r1.forward(&r0.forward(&h)?)?)?;
@@ -320,22 +333,10 @@ impl Codec for Baseline {
             codes: q.codes,
         })
     }
-    fn params(&self) -> &Params {
-        &self.params
+    fn trained(&self) -> &Trained {
+        &self.trained
     }
-    fn params_mut(&mut self) -> &mut Params {
-        &mut self.params
-    }
-    fn sync_buffers(&mut self) -> Result<()> {
-        self.rvq.save_into(&mut self.params, "rvq")
-    }
-    fn restore_buffers(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        self.rvq.load_from(tensors, "rvq")
-    }
-    fn root_stats(&self) -> &RootStats {
-        &self.config.root
-    }
-    fn weights(&self) -> &LossWeights {
-        &self.config.weights
+    fn trained_mut(&mut self) -> &mut Trained {
+        &mut self.trained
     }
 }
