@@ -86,6 +86,8 @@ impl Modulation {
                 let d = c.dim(D::Minus1)?;
                 let ss = film.scale_shift.forward(&c)?.unsqueeze(1)?;
                 let (scale, shift) = (ss.narrow(D::Minus1, 0, d)?, ss.narrow(D::Minus1, d, d)?);
+                // candle's sigmoid is a custom op with a backward pass (unlike its fused softmax and
+                // layer norm); `tokenizer/tests/training.rs` checks the gate's weights learn.
                 let gate = candle_nn::ops::sigmoid(&film.gate.forward(&c)?)?.unsqueeze(1)?;
                 let modulated = film.norm.forward(x)?.broadcast_mul(&(scale + 1.0)?)?.broadcast_add(&shift)?;
                 x + modulated.broadcast_mul(&gate)?
