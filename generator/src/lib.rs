@@ -1,1 +1,20 @@
-//! Text- and skeleton-conditioned motion token generation (masked and autoregressive transformers), sampling, editing and the text-motion evaluator; built in the text-to-motion issue.
+//! Text- and skeleton-conditioned motion token generation on TAT's tokens (NEC appendix D with
+//! MoMask's recipe): a masked transformer over the first RVQ layer, a residual transformer for
+//! the deeper layers, an autoregressive variant behind the same trait, a length predictor,
+//! token-level editing, and the text-motion evaluator that scores all of them.
+
+pub mod autoregressive;
+pub mod condition;
+pub mod corpus;
+pub mod evaluator;
+pub mod generate;
+pub mod length;
+pub mod masked;
+pub mod residual;
+pub mod sampling;
+pub mod trunk;
+
+pub use condition::Condition;
+pub use corpus::{Crop, TokenClip};
+pub use evaluator::{Evaluator, EvaluatorConfig};
+pub use generate::{GenerationError, Generator, GeneratorConfig, Request, TokenModel};

@@ -189,6 +189,19 @@ impl Motion {
         &self.translations[frame * j..(frame + 1) * j]
     }
 
+    /// Frames `first..first + count` (clamped to the clip) as a motion of their own.
+    pub fn slice(&self, first: usize, count: usize) -> Motion {
+        let j = self.skeleton().len();
+        let first = first.min(self.frames());
+        let end = (first + count).min(self.frames());
+        Motion::new(
+            self.skeleton().clone(),
+            self.frame_time(),
+            self.all_rotations()[first * j..end * j].to_vec(),
+            self.all_translations()[first * j..end * j].to_vec(),
+        )
+        .expect("a slice of a valid motion is valid")
+    }
     /// All local rotations, frame-major.
     pub fn all_rotations(&self) -> &[Quat] {
         &self.rotations

@@ -3,10 +3,11 @@
 
 use super::context::StoreArgs;
 use anyhow::{Context, Result};
+use anymo_generator::sampling::Sampling;
 use anymo_services::models::codecs::{self, Graphs};
 use anymo_services::models::data::{self, ModelClip};
 use anymo_services::models::evaluate::{self, Sums, TransferScores};
-use anymo_services::models::shipped;
+use anymo_services::models::{generation, generation_eval, shipped};
 use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::{Parser, Subcommand};
@@ -23,6 +24,44 @@ pub struct Args {
 enum What {
     /// Reconstruction and transfer of the trained tokenizers.
     Tokenizer(TokenizerArgs),
+    /// Text-to-motion on the test split by MoMask's protocol, GT row beside the generators.
+    Generator(GeneratorArgs),
+}
+
+#[derive(Parser)]
+struct GeneratorArgs {
+    /// The corpus manifest.
+    #[arg(long, default_value = "../shared/data/manifest.tsv")]
+    manifest: PathBuf,
+    /// Generators to compare, by checkpoint name.
+    #[arg(long, value_delimiter = ',', default_value = "generator,generator-ar")]
+    models: Vec<String>,
+    /// The evaluator checkpoint.
+    #[arg(long, default_value = "evaluator")]
+    evaluator: String,
+    /// Use at most this many clips per split.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Seed of the clip order and of sampling.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Classifier-free guidance scale.
+    #[arg(long, default_value_t = Sampling::default().guidance)]
+    guidance: f32,
+    /// Sampling temperature.
+    #[arg(long, default_value_t = Sampling::default().temperature)]
+    temperature: f32,
+    /// The checkpoints' folder.
+    #[arg(long, default_value_os_t = shipped::default_dir())]
+    dir: PathBuf,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Record the results in each generator's card.
+    #[arg(long)]
+    record: bool,
+    #[command(flatten)]
+    store: StoreArgs,
 }
 
 #[derive(Parser)]
@@ -55,6 +94,7 @@ struct TokenizerArgs {
 pub fn run(args: Args) -> Result<()> {
     match args.what {
         What::Tokenizer(a) => tokenizer(a),
+        What::Generator(a) => generator(a),
     }
 }
 
@@ -197,4 +237,59 @@ fn transfer_table(
         out.push(evaluate::transfer(&mut tat, &mut graphs, name, sources, target)?);
     }
     Ok(out)
+}
+
+fn generator(args: GeneratorArgs) -> Result<()> {
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let (clips, rejected) = data::load_manifest(&args.manifest, args.limit)
+        .with_context(|| format!("reading the manifest {}", args.manifest.display()))?;
+    let test: Vec<&ModelClip> = clips.iter().filter(|c| c.split == Split::Test).collect();
+    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
+    let mut encoder = CachedEncoder::new(args.store.encoder()?);
+    let (evaluator, evaluator_card) = generation::load_evaluator(&args.dir, &args.evaluator)?;
+    let tokenizer = evaluator_card.config["tokenizer_checkpoint"].as_str().unwrap_or("tat").to_string();
+    let (mut tat, _) = shipped::load_tat(&args.dir, &tokenizer, &mut encoder)?;
+    let mut loaded = Vec::new();
+    for name in &args.models {
+        let (generator, card) = generation::load_generator(&args.dir, name)?;
+        eprintln!("{name}: {} steps", card.steps);
+        loaded.push((name.clone(), generator));
+    }
+    let refs: Vec<(String, &anymo_generator::Generator)> = loaded.iter().map(|(n, g)| (n.clone(), g)).collect();
+    let sampling = Sampling { guidance: args.guidance, temperature: args.temperature, ..Sampling::default() };
+    let rows = generation_eval::evaluate(&mut tat, &evaluator, &refs, &test, &mut encoder, sampling, args.seed)?;
+    let mut table = String::from(
+        "| model | clips | R@1 | R@2 | R@3 | FID | MM-Dist | FS | GP | s/clip |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in &rows {
+        table.push_str(&format!(
+            "| {} ({}) | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.4} | {:.3} |\n",
+            r.model,
+            r.subset,
+            r.clips,
+            r.r_precision[0],
+            r.r_precision[1],
+            r.r_precision[2],
+            r.fid,
+            r.mm_dist,
+            r.foot_skating,
+            r.ground_penetration,
+            r.seconds_per_clip
+        ));
+    }
+    println!("{table}");
+    if args.record {
+        for name in &args.models {
+            let (_, card_path) = shipped::files(&args.dir, name);
+            let mut card = shipped::card(&args.dir, name)?;
+            let mine: Vec<&generation_eval::Row> =
+                rows.iter().filter(|r| &r.model == name || r.model == "GT").collect();
+            card.metrics["generation"] = serde_json::json!({ "rows": mine, "measured_by": command });
+            card.save(&card_path)?;
+        }
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "command": command }))?)?;
+    }
+    Ok(())
 }

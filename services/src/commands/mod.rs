@@ -5,6 +5,7 @@ mod convert;
 mod corpus;
 mod eval;
 mod fk;
+mod generate;
 mod ingest;
 mod input;
 mod inspect;
@@ -44,6 +45,10 @@ enum Command {
     Detokenize(tokens::DetokenizeArgs),
     /// Move a clip onto another skeleton (BVH), through tokens.
     Transfer(tokens::TransferArgs),
+    /// Motion from a text prompt on any skeleton (BVH).
+    Generate(generate::GenerateArgs),
+    /// Edit a clip by prompt: inpaint a span, continue it, or chain prompts.
+    Edit(generate::EditArgs),
 }
 
 impl Cli {
@@ -60,6 +65,8 @@ impl Cli {
             Command::Tokenize(args) => tokens::run_tokenize(args),
             Command::Detokenize(args) => tokens::run_detokenize(args),
             Command::Transfer(args) => tokens::run_transfer(args),
+            Command::Generate(args) => generate::run_generate(args),
+            Command::Edit(args) => generate::run_edit(args),
         }
     }
 }

@@ -128,7 +128,7 @@ fn read_target(path: &Path) -> Result<(Motion, CleanClip)> {
     Ok((rest, cleaned))
 }
 
-fn write_bvh(motion: &Motion, path: &Path) -> Result<()> {
+pub(super) fn write_bvh(motion: &Motion, path: &Path) -> Result<()> {
     let mut out = Vec::new();
     bvh::write(&motion.to_bvh(), &mut out)?;
     std::fs::write(path, out).with_context(|| format!("writing {}", path.display()))

@@ -3,9 +3,12 @@
 
 use super::context::StoreArgs;
 use anyhow::{Context, Result};
-use anymo_services::models::{data, shipped, train};
+use anymo_generator::generate::Kind;
+use anymo_generator::{Evaluator, EvaluatorConfig, Generator, GeneratorConfig, TokenClip};
+use anymo_services::models::{data, generation, shipped, train};
 use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::features::{canonicalise, to_features};
+use anymo_tokenizer::nn::DataRecord;
 use anymo_tokenizer::nn::{ModelCard, Params};
 use anymo_tokenizer::owo::graph::GLOBAL_NODE_TEXT;
 use anymo_tokenizer::owo::pretrain::{PretrainConfig, Pretrainer};
@@ -31,6 +34,63 @@ enum Model {
     Owo(OwoArgs),
     /// Train TAT (or the zero-padded baseline, or an ablation) on the train split.
     Tokenizer(TokenizerArgs),
+    /// Train the text-motion evaluator contrastively on the train split's TAT latents.
+    Evaluator(EvaluatorArgs),
+    /// Train the text-to-motion generator (masked or autoregressive) on the train split's tokens.
+    Generator(GeneratorArgs),
+}
+
+#[derive(Parser)]
+struct EvaluatorArgs {
+    #[command(flatten)]
+    common: Common,
+    /// The tokenizer checkpoint whose latents the evaluator reads.
+    #[arg(long, default_value = "tat")]
+    tokenizer: String,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 3000)]
+    steps: u64,
+    /// Clips per batch (the contrastive negatives).
+    #[arg(long, default_value_t = 64)]
+    batch_size: usize,
+    /// Peak learning rate.
+    #[arg(long, default_value_t = 3e-4)]
+    lr: f64,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum GeneratorKind {
+    /// MoMask's masked transformer.
+    Masked,
+    /// T2M-GPT's autoregressive transformer.
+    Autoregressive,
+}
+
+#[derive(Parser)]
+struct GeneratorArgs {
+    #[command(flatten)]
+    common: Common,
+    /// The tokenizer checkpoint whose tokens the generator writes.
+    #[arg(long, default_value = "tat")]
+    tokenizer: String,
+    /// The first-layer model.
+    #[arg(long, value_enum, default_value = "masked")]
+    kind: GeneratorKind,
+    /// Checkpoint name (default: `generator`, or `generator-ar` for the autoregressive kind).
+    #[arg(long)]
+    name: Option<String>,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 4000)]
+    steps: u64,
+    /// Crops per batch.
+    #[arg(long, default_value_t = 32)]
+    batch_size: usize,
+    /// Peak learning rate.
+    #[arg(long, default_value_t = 3e-4)]
+    lr: f64,
+    /// Transformer width (a tiny model for tests: 64).
+    #[arg(long, default_value_t = 192)]
+    dim: usize,
 }
 
 #[derive(Parser)]
@@ -120,6 +180,8 @@ pub fn run(args: Args) -> Result<()> {
     match args.model {
         Model::Owo(a) => owo(a),
         Model::Tokenizer(a) => tokenizer(a),
+        Model::Evaluator(a) => evaluator(a),
+        Model::Generator(a) => generator(a),
     }
 }
 
@@ -258,6 +320,96 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         command: command_line(),
     };
     train::ship(codec.params(), &card, &args.common.out_dir, &name)?;
+    eprintln!("wrote {}", args.common.out_dir.join(format!("{name}.safetensors")).display());
+    Ok(())
+}
+
+/// The train split tokenized by the shipped tokenizer, and the card fields that describe it.
+fn token_clips(common: &Common, tokenizer: &str) -> Result<(Vec<TokenClip>, DataRecord, RvqConfig, usize)> {
+    let clips = load(common)?;
+    let train_clips: Vec<&data::ModelClip> = clips.iter().filter(|c| c.split == Split::Train).collect();
+    let mut encoder = CachedEncoder::new(common.store.encoder()?);
+    let (mut tat, _) = shipped::load_tat(&common.out_dir, tokenizer, &mut encoder)?;
+    eprintln!("tokenizing {} training clips with {tokenizer}", train_clips.len());
+    let tokens = generation::token_clips(&train_clips, &mut tat, &mut encoder)?;
+    let record = data::data_record(&common.manifest, &train_clips);
+    Ok((tokens, record, tat.config().rvq, tat.config().owo.dim))
+}
+
+fn step_settings(common: &Common, steps: u64, lr: f64, batch_size: usize) -> train::StepTraining {
+    train::StepTraining {
+        steps,
+        lr,
+        warmup: 200.min(steps / 10),
+        seed: common.seed,
+        batch_size,
+        save_every_seconds: common.save_every,
+    }
+}
+
+fn evaluator(args: EvaluatorArgs) -> Result<()> {
+    let (clips, record, rvq, _) = token_clips(&args.common, &args.tokenizer)?;
+    let config = EvaluatorConfig::new(rvq.dim);
+    let mut model = Evaluator::new(config, args.common.seed)?;
+    eprintln!("evaluator: {} parameters", model.params().count());
+    let settings = step_settings(&args.common, args.steps, args.lr, args.batch_size);
+    let run = run_dir(&args.common, "evaluator")?;
+    let mut running = 0f32;
+    let state = train::train_steps(&mut model, Evaluator::params_mut, &settings, &run, |m, rng| {
+        let loss = m.batch_loss(&clips, settings.batch_size, rng)?;
+        running += (loss.to_scalar::<f32>()? - running) * 0.05;
+        Ok((loss, format!("contrastive {running:.3}")))
+    })?;
+    let card = ModelCard {
+        model: "evaluator".into(),
+        config: serde_json::json!({ "evaluator": config, "tokenizer_checkpoint": args.tokenizer, "training": settings }),
+        data: record,
+        steps: state.step,
+        metrics: serde_json::json!({ "train_seconds": state.seconds }),
+        command: command_line(),
+    };
+    train::ship(model.params(), &card, &args.common.out_dir, "evaluator")?;
+    eprintln!("wrote {}", args.common.out_dir.join("evaluator.safetensors").display());
+    Ok(())
+}
+
+fn generator(args: GeneratorArgs) -> Result<()> {
+    let (clips, record, rvq, skeleton_dim) = token_clips(&args.common, &args.tokenizer)?;
+    let kind = match args.kind {
+        GeneratorKind::Masked => Kind::Masked,
+        GeneratorKind::Autoregressive => Kind::Autoregressive,
+    };
+    let name = args.name.clone().unwrap_or_else(|| match kind {
+        Kind::Masked => "generator".into(),
+        Kind::Autoregressive => "generator-ar".into(),
+    });
+    let mut config = GeneratorConfig::new(kind, skeleton_dim, rvq.layers, rvq.codes);
+    config.base.dim = args.dim;
+    config.base.ff = 2 * args.dim;
+    config.residual.dim = args.dim;
+    config.residual.ff = 2 * args.dim;
+    config.length_hidden = args.dim;
+    let mut model = Generator::new(config.clone(), args.common.seed)?;
+    eprintln!("{name}: {} parameters", model.params().count());
+    let settings = step_settings(&args.common, args.steps, args.lr, args.batch_size);
+    let run = run_dir(&args.common, &name)?;
+    let mut running = [0f32; 3];
+    let state = train::train_steps(&mut model, Generator::params_mut, &settings, &run, |m, rng| {
+        let (loss, parts) = m.batch_loss(&clips, settings.batch_size, rng)?;
+        for (r, p) in running.iter_mut().zip(parts) {
+            *r += (p - *r) * 0.05;
+        }
+        Ok((loss, format!("base {:.3} residual {:.3} length {:.3}", running[0], running[1], running[2])))
+    })?;
+    let card = ModelCard {
+        model: name.clone(),
+        config: serde_json::json!({ "generator": config, "tokenizer_checkpoint": args.tokenizer, "training": settings }),
+        data: record,
+        steps: state.step,
+        metrics: serde_json::json!({ "train_seconds": state.seconds }),
+        command: command_line(),
+    };
+    train::ship(model.params(), &card, &args.common.out_dir, &name)?;
     eprintln!("wrote {}", args.common.out_dir.join(format!("{name}.safetensors")).display());
     Ok(())
 }

@@ -5,5 +5,8 @@
 pub mod codecs;
 pub mod data;
 pub mod evaluate;
+pub mod generation;
+pub mod generation_eval;
 pub mod shipped;
+pub mod studio;
 pub mod train;

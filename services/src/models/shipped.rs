@@ -29,7 +29,12 @@ pub fn card(dir: &Path, name: &str) -> Result<ModelCard> {
         bail!(
             "checkpoint {name} not found in {} (a clean clone ships it in tokenizer/checkpoints; train one with `anymo train {}`)",
             dir.display(),
-            if name == "owo" { "owo" } else { "tokenizer" }
+            match name {
+                "owo" => "owo",
+                "evaluator" => "evaluator",
+                n if n.starts_with("generator") => "generator",
+                _ => "tokenizer",
+            }
         );
     }
     Ok(load_card(&card)?)

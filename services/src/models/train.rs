@@ -266,6 +266,65 @@ pub fn train_codec(
     Ok(state)
 }
 
+/// Settings of a run of the generic step loop.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StepTraining {
+    /// Optimiser steps.
+    pub steps: u64,
+    /// Peak learning rate.
+    pub lr: f64,
+    /// Warm-up steps.
+    pub warmup: u64,
+    /// Seed of sampling.
+    pub seed: u64,
+    /// Batch size.
+    pub batch_size: usize,
+    /// Seconds between saves of the run state.
+    pub save_every_seconds: u64,
+}
+
+/// Trains a model whose every step draws its own batch: `step(model, rng)` returns the loss
+/// and a progress message. The step's generator is seeded from the run seed and the step
+/// number, so a resumed run draws exactly the batches the killed one would have.
+pub fn train_steps<M>(
+    model: &mut M,
+    params_mut: impl Fn(&mut M) -> &mut Params,
+    settings: &StepTraining,
+    run: &RunDir,
+    mut step: impl FnMut(&M, &mut ChaCha8Rng) -> Result<(Tensor, String)>,
+) -> Result<RunState> {
+    let mut optimiser = AdamW::new(params_mut(model), AdamWConfig::default())?;
+    let mut state = RunState::default();
+    if let Some(saved) = run.state()? {
+        run.restore(params_mut(model), &mut optimiser)?;
+        state = saved;
+        eprintln!("resuming at step {}", state.step);
+    }
+    let bar = progress(settings.steps, state.step);
+    let mut log = LogLines::new();
+    let mut last_save = Instant::now();
+    let started = Instant::now() - Duration::from_secs_f64(state.seconds);
+    while state.step < settings.steps {
+        let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ state.step.wrapping_mul(0x2545_F491_4F6C_DD1D));
+        let (loss, message) = step(model, &mut rng)?;
+        let grads = loss.backward()?;
+        let lr = schedule(settings.lr, settings.warmup, settings.steps, state.step);
+        optimiser.step(params_mut(model), &grads, lr)?;
+        state.step += 1;
+        state.seconds = started.elapsed().as_secs_f64();
+        bar.set_position(state.step);
+        log.maybe(state.step, settings.steps, &message);
+        bar.set_message(message);
+        if last_save.elapsed() >= Duration::from_secs(settings.save_every_seconds) || state.step == settings.steps {
+            run.save(params_mut(model), &optimiser, &state)?;
+            last_save = Instant::now();
+        }
+    }
+    run.save(params_mut(model), &optimiser, &state)?;
+    bar.finish();
+    Ok(state)
+}
+
 /// Writes a shipped checkpoint: weights and model card side by side.
 pub fn ship(params: &Params, card: &ModelCard, dir: &Path, name: &str) -> Result<()> {
     std::fs::create_dir_all(dir)?;

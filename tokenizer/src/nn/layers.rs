@@ -147,6 +147,12 @@ impl Attention {
 
     /// Every position attends to every position of its own sequence.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward_masked(x, None)
+    }
+
+    /// Attention where `mask (L, L)`, added to the scores, blocks pairs with `-inf` (a causal
+    /// mask for autoregressive models).
+    pub fn forward_masked(&self, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
         let (n, l, dim) = x.dims3()?;
         let head = dim / self.heads;
         let qkv = self.qkv.forward(x)?.reshape((n, l, 3, self.heads, head))?.permute((2, 0, 3, 1, 4))?;
@@ -154,7 +160,10 @@ impl Attention {
         let k = qkv.get(1)?.contiguous()?.reshape((n * self.heads, l, head))?;
         let v = qkv.get(2)?.contiguous()?.reshape((n * self.heads, l, head))?;
         super::flops::record(2 * n * self.heads, l, head, l);
-        let scores = (q.matmul(&k.t()?)? * (1.0 / (head as f64).sqrt()))?;
+        let mut scores = (q.matmul(&k.t()?)? * (1.0 / (head as f64).sqrt()))?;
+        if let Some(mask) = mask {
+            scores = scores.broadcast_add(mask)?;
+        }
         let weights = candle_nn::ops::softmax(&scores, D::Minus1)?;
         let mixed = weights.matmul(&v)?.reshape((n, self.heads, l, head))?.transpose(1, 2)?.reshape((n, l, dim))?;
         self.out.forward(&mixed)
@@ -185,7 +194,12 @@ impl TransformerLayer {
 
     /// Applies the layer to `(N, L, dim)`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let x = (x + self.attention.forward(&self.norm1.forward(x)?)?)?;
+        self.forward_masked(x, None)
+    }
+
+    /// Applies the layer with an attention mask (see [`Attention::forward_masked`]).
+    pub fn forward_masked(&self, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+        let x = (x + self.attention.forward_masked(&self.norm1.forward(x)?, mask)?)?;
         &x + self.ff.forward(&self.norm2.forward(&x)?)?
     }
 }

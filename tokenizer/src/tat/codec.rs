@@ -172,10 +172,21 @@ impl Tat {
 
     /// Codes `(B * T', layers)` of prepared windows.
     pub fn encode(&mut self, input: &Tensor, condition: &Tensor) -> Result<Vec<Vec<u32>>> {
+        Ok(self.encode_with_latent(input, condition)?.1)
+    }
+
+    /// The encoder's output before quantisation `(B, T', dim)` and the codes `(B * T', layers)`.
+    pub fn encode_with_latent(&mut self, input: &Tensor, condition: &Tensor) -> Result<(Tensor, Vec<Vec<u32>>)> {
         let latent = self.encoder.forward(input, condition)?;
         let (b, t, c) = latent.dims3()?;
         let q = self.trained.rvq.forward(&latent.reshape((b * t, c))?, false, &mut rand::rng())?;
-        Ok(q.codes)
+        Ok((latent, q.codes))
+    }
+
+    /// OwO's global embedding of a skeleton: what the generator is conditioned on.
+    pub fn skeleton_embedding(&self, graph: &SkeletonGraph) -> Result<Vec<f32>> {
+        let batch = GraphBatch::new(&[graph], &self.global_text, self.config.owo.freqs)?;
+        self.owo.embed(&batch)?.remove(0).global.to_vec1()
     }
 
     /// Decodes codes `(B * T', layers)` for `B` windows onto the skeleton of `condition`.

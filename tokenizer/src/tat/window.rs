@@ -169,6 +169,48 @@ pub fn tokenize(tat: &mut super::Tat, graph: &SkeletonGraph, motion: &Motion) ->
     })
 }
 
+/// A whole clip encoded in one window: its tokens and the encoder's latents before
+/// quantisation (what the text-motion evaluator reads).
+pub struct Encoded {
+    /// The tokens (one window covering the clip).
+    pub tokens: Tokens,
+    /// `steps x latent_dim` latents.
+    pub latent: Vec<f32>,
+}
+
+/// Encodes a cleaned clip in one window, padded to whole token steps. The encoder is
+/// convolutional in time and attends over joints only, so a window of any length is valid.
+pub fn encode_whole(tat: &mut super::Tat, graph: &SkeletonGraph, motion: &Motion) -> Result<Encoded> {
+    let per_token = tat.config().tat.frames_per_token();
+    let truth = canonicalise(motion);
+    let (_, original_start) = to_features(motion);
+    let (features, _) = to_features(&truth);
+    let window = features.frames.div_ceil(per_token) * per_token;
+    let batch = windows_batch(&features, truth.skeleton(), &[0], window)?;
+    let prepared = Prepared::new(&batch, &tat.config().root)?;
+    let condition = tat.condition(graph, &prepared.offsets)?;
+    let (latent, codes) = tat.encode_with_latent(&prepared.input, &condition)?;
+    Ok(Encoded {
+        tokens: Tokens {
+            frames: features.frames,
+            fps: motion.fps(),
+            window,
+            starts: vec![0],
+            start: [original_start.heading, original_start.planar[0], original_start.planar[1]],
+            codes: vec![codes],
+        },
+        latent: latent.flatten_all()?.to_vec1()?,
+    })
+}
+
+impl Tokens {
+    /// Tokens of one window of generated codes (`steps x layers`), starting at the origin.
+    pub fn whole(codes: Vec<Vec<u32>>, frames_per_token: usize, fps: f64) -> Tokens {
+        let frames = codes.len() * frames_per_token;
+        Tokens { frames, fps, window: frames, starts: vec![0], start: [0.0; 3], codes: vec![codes] }
+    }
+}
+
 /// Decodes tokens onto a cleaned skeleton (diameter 1); the root path is scaled by `scale`
 /// (the target's size relative to the source's, 1 for the same skeleton).
 pub fn detokenize(tat: &super::Tat, tokens: &Tokens, graph: &SkeletonGraph, skeleton: &Skeleton) -> Result<Motion> {

@@ -1,0 +1,352 @@
+//! The generator: a first-layer token model (masked or autoregressive), the residual
+//! transformer and the length predictor under one set of parameters, and what users ask of it:
+//! generation of any length, inpainting, continuation and prompt chains.
+
+use crate::autoregressive::Autoregressive;
+use crate::condition::Condition;
+use crate::corpus::{TokenClip, draw_batch};
+use crate::length::LengthPredictor;
+use crate::masked::MaskedTransformer;
+use crate::residual::ResidualTransformer;
+use crate::sampling::Sampling;
+use crate::trunk::TrunkConfig;
+use anymo_tokenizer::nn::Params;
+use candle_core::Tensor;
+type Result<T, E = candle_core::Error> = std::result::Result<T, E>;
+use rand::{Rng, RngCore, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+/// A model of first-layer token sequences given a condition.
+pub trait TokenModel {
+    /// Training loss on first-layer codes `(B, L)`.
+    fn loss(&self, codes: &[Vec<u32>], condition: &Condition, rng: &mut dyn RngCore) -> Result<Tensor>;
+    /// Codes `(B, L)` where `known` gives none, keeping the known ones.
+    fn sample(
+        &self,
+        condition: &Condition,
+        known: &[Vec<Option<u32>>],
+        sampling: &Sampling,
+        rng: &mut dyn RngCore,
+    ) -> Result<Vec<Vec<u32>>>;
+}
+
+/// Which first-layer model.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Kind {
+    /// MoMask's masked transformer with iterative decoding.
+    Masked,
+    /// T2M-GPT's next-token transformer.
+    Autoregressive,
+}
+
+/// Everything that defines a generator checkpoint.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct GeneratorConfig {
+    /// The first-layer model.
+    pub kind: Kind,
+    /// Its trunk.
+    pub base: TrunkConfig,
+    /// The residual transformer's trunk.
+    pub residual: TrunkConfig,
+    /// RVQ layers.
+    pub layers: usize,
+    /// Codes per layer.
+    pub codes: usize,
+    /// Iterations of masked decoding.
+    pub decoding_steps: usize,
+    /// Probability that training drops the prompt (for classifier-free guidance).
+    pub text_dropout: f32,
+    /// Hidden width of the length predictor.
+    pub length_hidden: usize,
+}
+
+impl GeneratorConfig {
+    /// The default shape for a tokenizer of `layers x codes` and skeleton embeddings of
+    /// `skeleton_dim`.
+    pub fn new(kind: Kind, skeleton_dim: usize, layers: usize, codes: usize) -> GeneratorConfig {
+        let trunk = TrunkConfig { dim: 192, layers: 4, heads: 4, ff: 384, max_tokens: 64, skeleton_dim };
+        GeneratorConfig {
+            kind,
+            base: trunk,
+            residual: TrunkConfig { layers: 3, ..trunk },
+            layers,
+            codes,
+            decoding_steps: 10,
+            text_dropout: 0.1,
+            length_hidden: 192,
+        }
+    }
+
+    /// Longest sequence one pass generates; longer ones continue window by window.
+    pub fn max_tokens(&self) -> usize {
+        self.base.max_tokens
+    }
+}
+
+/// What a user asks for.
+#[derive(Clone, Debug)]
+pub struct Request {
+    /// Token steps to generate (`None`: the length predictor decides).
+    pub steps: Option<usize>,
+    /// Samples to draw.
+    pub samples: usize,
+    /// How tokens are drawn.
+    pub sampling: Sampling,
+    /// Seed of the draw: the same request and seed give the same motion.
+    pub seed: u64,
+}
+
+/// Why a generation cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum GenerationError {
+    /// Zero samples or zero steps asked for.
+    #[error("nothing to generate: ask for at least one sample of at least one token step")]
+    Empty,
+    /// The codes given to an edit do not fit the model.
+    #[error("the clip's tokens do not fit this generator ({layers} layers of {codes} codes)")]
+    CodesDoNotFit {
+        /// Layers the generator knows.
+        layers: usize,
+        /// Codes per layer.
+        codes: usize,
+    },
+    /// A model error.
+    #[error(transparent)]
+    Model(#[from] candle_core::Error),
+}
+
+/// Codes of one sample: `steps x layers`.
+pub type Codes = Vec<Vec<u32>>;
+
+/// The trained generator.
+pub struct Generator {
+    config: GeneratorConfig,
+    params: Params,
+    base: Box<dyn TokenModel + Send + Sync>,
+    residual: ResidualTransformer,
+    length: LengthPredictor,
+}
+
+impl Generator {
+    /// A fresh generator initialised from `seed`.
+    pub fn new(config: GeneratorConfig, seed: u64) -> Result<Generator> {
+        let mut params = Params::new(seed);
+        let base: Box<dyn TokenModel + Send + Sync> = match config.kind {
+            Kind::Masked => {
+                Box::new(MaskedTransformer::new(&mut params, &config.base, config.codes, config.decoding_steps)?)
+            }
+            Kind::Autoregressive => Box::new(Autoregressive::new(&mut params, &config.base, config.codes)?),
+        };
+        let residual = ResidualTransformer::new(&mut params, &config.residual, config.layers, config.codes)?;
+        let length =
+            LengthPredictor::new(&mut params, config.base.skeleton_dim, config.length_hidden, config.max_tokens())?;
+        Ok(Generator { config, params, base, residual, length })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &GeneratorConfig {
+        &self.config
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// The parameters, for loading.
+    pub fn params_mut(&mut self) -> &mut Params {
+        &mut self.params
+    }
+
+    /// Training loss on crops `(B, L, layers)` of clips `clip_steps` long: the first-layer,
+    /// residual and length terms, and their sum.
+    pub fn loss(
+        &self,
+        codes: &[Codes],
+        text: &[&[f32]],
+        skeleton: &[&[f32]],
+        clip_steps: &[usize],
+        rng: &mut dyn RngCore,
+    ) -> Result<(Tensor, [f32; 3])> {
+        let full = Condition::new(text, skeleton)?;
+        let zero = vec![0f32; text[0].len()];
+        let dropped: Vec<&[f32]> =
+            text.iter().map(|&t| if rng.random::<f32>() < self.config.text_dropout { &zero[..] } else { t }).collect();
+        let condition = Condition::new(&dropped, skeleton)?;
+        let first: Vec<Vec<u32>> = codes.iter().map(|row| row.iter().map(|step| step[0]).collect()).collect();
+        let base = self.base.loss(&first, &condition, rng)?;
+        let residual = self.residual.loss(codes, &condition, rng)?;
+        let length = self.length.loss(&full, clip_steps)?;
+        let total = ((&base + &residual)? + (&length * 0.1)?)?;
+        let parts = [base.to_scalar::<f32>()?, residual.to_scalar::<f32>()?, length.to_scalar::<f32>()?];
+        Ok((total, parts))
+    }
+
+    /// The training loss on a batch of `batch` crops drawn from `clips` (see [`Generator::loss`]).
+    pub fn batch_loss(&self, clips: &[TokenClip], batch: usize, rng: &mut dyn RngCore) -> Result<(Tensor, [f32; 3])> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(rng.next_u64());
+        let (length, crops) = draw_batch(clips, batch, self.config.max_tokens(), &mut rng);
+        let codes: Vec<Codes> = crops.iter().map(|c| clips[c.clip].codes[c.start..c.start + length].to_vec()).collect();
+        let text: Vec<&[f32]> = crops.iter().map(|c| clips[c.clip].text[c.caption].as_slice()).collect();
+        let skeleton: Vec<&[f32]> = crops.iter().map(|c| clips[c.clip].skeleton.as_slice()).collect();
+        let steps: Vec<usize> = crops.iter().map(|c| clips[c.clip].steps()).collect();
+        self.loss(&codes, &text, &skeleton, &steps, &mut rng)
+    }
+
+    /// Token steps the length predictor gives a prompt on a skeleton.
+    pub fn predict_steps(&self, text: &[f32], skeleton: &[f32]) -> Result<usize> {
+        Ok(self.length.predict(&Condition::new(&[text], &[skeleton])?)?[0])
+    }
+
+    /// New motion: `request.samples` code sequences for a prompt on a skeleton.
+    pub fn generate(&self, text: &[f32], skeleton: &[f32], request: &Request) -> Result<Vec<Codes>, GenerationError> {
+        let steps = match request.steps {
+            Some(steps) => steps,
+            None => self.predict_steps(text, skeleton)?,
+        };
+        self.fill(text, skeleton, vec![None; steps], request)
+    }
+
+    /// Temporal inpainting: a clip's codes with the steps where `keep` is false regenerated from
+    /// the prompt.
+    pub fn inpaint(
+        &self,
+        text: &[f32],
+        skeleton: &[f32],
+        codes: &[Vec<u32>],
+        keep: &[bool],
+        request: &Request,
+    ) -> Result<Vec<Codes>, GenerationError> {
+        self.check(codes)?;
+        let known = codes.iter().zip(keep).map(|(c, &k)| k.then(|| c.clone())).collect();
+        self.fill(text, skeleton, known, request)
+    }
+
+    /// Continuation: a clip's codes followed by `extra` new steps from the prompt.
+    pub fn extend(
+        &self,
+        text: &[f32],
+        skeleton: &[f32],
+        codes: &[Vec<u32>],
+        extra: usize,
+        request: &Request,
+    ) -> Result<Vec<Codes>, GenerationError> {
+        self.check(codes)?;
+        let known = codes.iter().cloned().map(Some).chain(std::iter::repeat_n(None, extra)).collect();
+        self.fill(text, skeleton, known, request)
+    }
+
+    /// Prompts one after another (each with its steps), every part generated as the
+    /// continuation of what came before, so the transitions are the model's own.
+    pub fn chain(
+        &self,
+        parts: &[(&[f32], usize)],
+        skeleton: &[f32],
+        request: &Request,
+    ) -> Result<Vec<Codes>, GenerationError> {
+        let Some((&(first_text, first_steps), rest)) = parts.split_first() else {
+            return Err(GenerationError::Empty);
+        };
+        let mut samples = self.fill(first_text, skeleton, vec![None; first_steps], request)?;
+        for (k, &(text, steps)) in rest.iter().enumerate() {
+            let mut next = Vec::with_capacity(samples.len());
+            for (s, sample) in samples.iter().enumerate() {
+                let one =
+                    Request { samples: 1, seed: request.seed ^ ((k as u64 + 1) << 32 | s as u64), ..request.clone() };
+                let known = sample.iter().cloned().map(Some).chain(std::iter::repeat_n(None, steps)).collect();
+                next.push(self.fill(text, skeleton, known, &one)?.remove(0));
+            }
+            samples = next;
+        }
+        Ok(samples)
+    }
+
+    fn check(&self, codes: &[Vec<u32>]) -> Result<(), GenerationError> {
+        let fits = codes
+            .iter()
+            .all(|step| step.len() == self.config.layers && step.iter().all(|&c| (c as usize) < self.config.codes));
+        if fits {
+            Ok(())
+        } else {
+            Err(GenerationError::CodesDoNotFit { layers: self.config.layers, codes: self.config.codes })
+        }
+    }
+
+    /// Fills the unknown steps of `known` once per sample. Sample `k` draws from its own
+    /// generator (seeded from the request's seed and `k`), so it is the same whatever the
+    /// number of samples asked for.
+    fn fill(
+        &self,
+        text: &[f32],
+        skeleton: &[f32],
+        known: Vec<Option<Vec<u32>>>,
+        request: &Request,
+    ) -> Result<Vec<Codes>, GenerationError> {
+        if request.samples == 0 || known.is_empty() {
+            return Err(GenerationError::Empty);
+        }
+        let condition = Condition::new(&[text], &[skeleton])?;
+        (0..request.samples)
+            .map(|k| {
+                let seed = request.seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+                Ok(self.fill_one(&condition, known.clone(), &request.sampling, &mut rng)?)
+            })
+            .collect()
+    }
+
+    /// One sample, window by window when longer than one pass: each later window keeps the
+    /// second half of the one before it as context.
+    fn fill_one(
+        &self,
+        condition: &Condition,
+        known: Vec<Option<Vec<u32>>>,
+        sampling: &Sampling,
+        rng: &mut dyn RngCore,
+    ) -> Result<Codes> {
+        let max = self.config.max_tokens();
+        let total = known.len();
+        let mut state = known;
+        let mut start = 0;
+        loop {
+            let end = (start + max).min(total);
+            if state[start..end].iter().any(Option::is_none) {
+                let window = vec![state[start..end].to_vec()];
+                let filled = self.fill_window(condition, &window, sampling, rng)?.remove(0);
+                for (slot, step) in state[start..end].iter_mut().zip(filled) {
+                    *slot = Some(step);
+                }
+            }
+            if end == total {
+                break;
+            }
+            start = end - max / 2;
+        }
+        Ok(state.into_iter().map(|s| s.expect("filled")).collect())
+    }
+
+    fn fill_window(
+        &self,
+        condition: &Condition,
+        known: &[Vec<Option<Vec<u32>>>],
+        sampling: &Sampling,
+        rng: &mut dyn RngCore,
+    ) -> Result<Vec<Codes>> {
+        let first: Vec<Vec<Option<u32>>> =
+            known.iter().map(|row| row.iter().map(|s| s.as_ref().map(|c| c[0])).collect()).collect();
+        let base = self.base.sample(condition, &first, sampling, rng)?;
+        let residual_known: Vec<Vec<Vec<Option<u32>>>> = known
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|s| match s {
+                        Some(c) => c.iter().copied().map(Some).collect(),
+                        None => vec![None; self.config.layers],
+                    })
+                    .collect()
+            })
+            .collect();
+        self.residual.sample(condition, &base, &residual_known, sampling, rng)
+    }
+}

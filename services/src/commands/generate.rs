@@ -1,0 +1,229 @@
+//! `anymo generate` and `anymo edit`: a prompt to motion on any skeleton, and token-level edits
+//! of a clip (inpainting a span, continuing it, chaining prompts), with the shipped checkpoints.
+
+use super::context::StoreArgs;
+use super::tokens::write_bvh;
+use anyhow::{Context, Result, bail};
+use anymo_generator::Request;
+use anymo_generator::sampling::Sampling;
+use anymo_services::models::data::MODEL_FPS;
+use anymo_services::models::shipped;
+use anymo_services::models::studio::Studio;
+use anymo_tokenizer::bvh;
+use anymo_tokenizer::motion::Motion;
+use anymo_tokenizer::skeleton::Skeleton;
+use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+
+/// Options shared by generation and editing.
+#[derive(Parser)]
+pub struct GenerationArgs {
+    /// The checkpoints' folder.
+    #[arg(long, default_value_os_t = shipped::default_dir())]
+    checkpoints: PathBuf,
+    /// The generator checkpoint (`generator`: masked; `generator-ar`: autoregressive).
+    #[arg(long, default_value = "generator")]
+    model: String,
+    /// Samples to draw (written as OUT, OUT-2, OUT-3, ...).
+    #[arg(long, default_value_t = 1)]
+    samples: usize,
+    /// Seed: the same request and seed give the same motion.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Classifier-free guidance scale (1: none).
+    #[arg(long, default_value_t = Sampling::default().guidance)]
+    guidance: f32,
+    /// Sampling temperature (0: always the most likely token).
+    #[arg(long, default_value_t = Sampling::default().temperature)]
+    temperature: f32,
+    /// Draw only among the k most likely tokens (0: all).
+    #[arg(long, default_value_t = 0)]
+    top_k: usize,
+    #[command(flatten)]
+    store: StoreArgs,
+}
+
+#[derive(Parser)]
+pub struct GenerateArgs {
+    /// What the motion shows, in English.
+    prompt: String,
+    /// The skeleton to animate: a BVH file (its motion, if any, is ignored).
+    #[arg(long)]
+    skeleton: PathBuf,
+    /// Duration in seconds (default: the length the model predicts for the prompt).
+    #[arg(long, conflicts_with = "frames")]
+    seconds: Option<f64>,
+    /// Duration in frames at 30 fps.
+    #[arg(long)]
+    frames: Option<usize>,
+    /// The BVH to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    generation: GenerationArgs,
+}
+
+#[derive(Parser)]
+pub struct EditArgs {
+    #[command(subcommand)]
+    edit: Edit,
+}
+
+#[derive(Subcommand)]
+enum Edit {
+    /// Regenerate the span FROM..TO seconds of a clip from a prompt, keeping the rest.
+    Inpaint {
+        /// The clip: a BVH file.
+        input: PathBuf,
+        /// What the new span shows.
+        #[arg(long)]
+        prompt: String,
+        /// Start of the span, seconds.
+        #[arg(long)]
+        from: f64,
+        /// End of the span, seconds.
+        #[arg(long)]
+        to: f64,
+        /// The BVH to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        generation: GenerationArgs,
+    },
+    /// Extend a clip by SECONDS of motion from a prompt.
+    Continue {
+        /// The clip: a BVH file.
+        input: PathBuf,
+        /// What the continuation shows.
+        #[arg(long)]
+        prompt: String,
+        /// Seconds to add.
+        #[arg(long)]
+        seconds: f64,
+        /// The BVH to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        generation: GenerationArgs,
+    },
+    /// Prompts one after another on one skeleton, each flowing into the next:
+    /// `--prompt "a person walks" --seconds 3 --prompt "a person sits down" --seconds 2`.
+    Chain {
+        /// The skeleton to animate: a BVH file.
+        #[arg(long)]
+        skeleton: PathBuf,
+        /// The prompts, in order.
+        #[arg(long = "prompt", required = true)]
+        prompts: Vec<String>,
+        /// Seconds of each prompt, in the same order.
+        #[arg(long = "seconds", required = true)]
+        seconds: Vec<f64>,
+        /// The BVH to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        generation: GenerationArgs,
+    },
+}
+
+fn load(args: &GenerationArgs) -> Result<(Studio, Request)> {
+    if args.samples == 0 {
+        bail!("--samples must be at least 1");
+    }
+    let studio = Studio::load(&args.checkpoints, &args.model, args.store.encoder()?)?;
+    let sampling = Sampling { temperature: args.temperature, top_k: args.top_k, guidance: args.guidance };
+    Ok((studio, Request { steps: None, samples: args.samples, sampling, seed: args.seed }))
+}
+
+fn read_skeleton(path: &Path) -> Result<Skeleton> {
+    let clip =
+        bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
+    Ok(clip.skeleton().clone())
+}
+
+fn write_all(motions: Vec<Motion>, output: &Path) -> Result<()> {
+    for (k, motion) in motions.iter().enumerate() {
+        write_bvh(motion, &sample_path(output, k))?;
+    }
+    Ok(())
+}
+
+/// Where sample `k` goes: OUT for the first, OUT-2, OUT-3, ... for the others.
+fn sample_path(output: &Path, k: usize) -> PathBuf {
+    if k == 0 {
+        return output.to_path_buf();
+    }
+    let stem = output.file_stem().map_or_else(|| "sample".into(), |s| s.to_string_lossy().into_owned());
+    let ext = output.extension().map_or_else(|| "bvh".into(), |s| s.to_string_lossy().into_owned());
+    output.with_file_name(format!("{stem}-{}.{ext}", k + 1))
+}
+
+pub fn run_generate(args: GenerateArgs) -> Result<()> {
+    let (mut studio, request) = load(&args.generation)?;
+    let target = studio.target(&read_skeleton(&args.skeleton)?)?;
+    let seconds = args.seconds.or(args.frames.map(|f| f as f64 / MODEL_FPS));
+    let steps = match seconds {
+        Some(s) => studio.steps(s)?,
+        None => {
+            let text = studio.text(&args.prompt)?;
+            studio.generator.predict_steps(&text, &target.embedding)?
+        }
+    };
+    let frames = seconds.map(|s| (s * MODEL_FPS).round() as usize);
+    let samples = studio.generate(&args.prompt, &target, &Request { steps: Some(steps), ..request })?;
+    write_all(studio.render(samples, [0.0; 3], frames, &target)?, &args.output)
+}
+
+fn read_motion(path: &Path) -> Result<Motion> {
+    let clip = bvh::read_path(path, bvh::ReadOptions { require_motion: true })
+        .with_context(|| format!("reading {}", path.display()))?;
+    Ok(Motion::from_bvh(&clip))
+}
+
+pub fn run_edit(args: EditArgs) -> Result<()> {
+    match args.edit {
+        Edit::Inpaint { input, prompt, from, to, output, generation } => {
+            if !(from >= 0.0 && to > from) {
+                bail!("the span must satisfy 0 <= --from < --to; got {from}..{to}");
+            }
+            let (mut studio, request) = load(&generation)?;
+            let (target, codes, start) = studio.clip(&read_motion(&input)?)?;
+            let per = studio.frames_per_token() as f64 / MODEL_FPS;
+            let duration = target.cleaned.motion.frames() as f64 / MODEL_FPS;
+            if from >= duration {
+                bail!("the span starts at {from} s but {} lasts {duration:.2} s", input.display());
+            }
+            let keep: Vec<bool> =
+                (0..codes.len()).map(|t| !((t as f64 + 1.0) * per > from && (t as f64) * per < to)).collect();
+            let text = studio.text(&prompt)?;
+            let samples = studio.generator.inpaint(&text, &target.embedding, &codes, &keep, &request)?;
+            let frames = target.cleaned.motion.frames();
+            write_all(studio.render(samples, start, Some(frames), &target)?, &output)
+        }
+        Edit::Continue { input, prompt, seconds, output, generation } => {
+            let (mut studio, request) = load(&generation)?;
+            let extra = studio.steps(seconds)?;
+            let (target, codes, start) = studio.clip(&read_motion(&input)?)?;
+            let text = studio.text(&prompt)?;
+            let samples = studio.generator.extend(&text, &target.embedding, &codes, extra, &request)?;
+            let frames = target.cleaned.motion.frames() + (seconds * MODEL_FPS).round() as usize;
+            write_all(studio.render(samples, start, Some(frames), &target)?, &output)
+        }
+        Edit::Chain { skeleton, prompts, seconds, output, generation } => {
+            if prompts.len() != seconds.len() {
+                bail!("give one --seconds per --prompt ({} prompts, {} durations)", prompts.len(), seconds.len());
+            }
+            let (mut studio, request) = load(&generation)?;
+            studio.steps(seconds.iter().sum()).context("the chain as a whole")?;
+            let target = studio.target(&read_skeleton(&skeleton)?)?;
+            let mut parts = Vec::new();
+            for (prompt, &s) in prompts.iter().zip(&seconds) {
+                parts.push((studio.text(prompt)?, studio.steps(s)?));
+            }
+            let refs: Vec<(&[f32], usize)> = parts.iter().map(|(t, s)| (t.as_slice(), *s)).collect();
+            let samples = studio.generator.chain(&refs, &target.embedding, &request)?;
+            let frames = seconds.iter().map(|s| (s * MODEL_FPS).round() as usize).sum();
+            write_all(studio.render(samples, [0.0; 3], Some(frames), &target)?, &output)
+        }
+    }
+}
