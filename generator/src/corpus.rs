@@ -21,6 +21,10 @@ pub struct TokenClip {
     pub codes: Vec<Vec<u32>>,
     /// `steps x latent_dim` encoder output before quantisation (what the evaluator reads).
     pub latent: Vec<f32>,
+    /// The same for the clip's own codes decoded and encoded again (empty when not computed):
+    /// the evaluator also trains on these, so that it measures motion, not the tokenizer's
+    /// reconstruction error.
+    pub decoded_latent: Vec<f32>,
 }
 
 impl TokenClip {
@@ -83,6 +87,7 @@ mod tests {
             skeleton: vec![0.0; 2],
             codes: vec![vec![0; 2]; steps],
             latent: vec![0.0; steps * 3],
+            decoded_latent: Vec::new(),
         }
     }
 

@@ -150,7 +150,9 @@ impl Evaluator {
         let mut text = Vec::with_capacity(batch * TEXT_DIM);
         for c in &crops {
             let clip = &clips[c.clip];
-            latent.extend_from_slice(&clip.latent[c.start * d..(c.start + length) * d]);
+            let decoded = !clip.decoded_latent.is_empty() && rng.random_bool(0.5);
+            let rows = if decoded { &clip.decoded_latent } else { &clip.latent };
+            latent.extend_from_slice(&rows[c.start * d..(c.start + length) * d]);
             text.extend_from_slice(&clip.text[c.caption]);
         }
         let caption = |c: &Crop| &clips[c.clip].captions[c.caption];
@@ -210,7 +212,7 @@ pub fn fid(a: &[Vec<f32>], b: &[Vec<f32>]) -> f64 {
         .iter()
         .map(|&v| v.max(0.0).sqrt())
         .sum();
-    (mu_a - mu_b).norm_squared() + cov_a.trace() + cov_b.trace() - 2.0 * trace_root
+    ((mu_a - mu_b).norm_squared() + cov_a.trace() + cov_b.trace() - 2.0 * trace_root).max(0.0)
 }
 
 fn moments(rows: &[Vec<f32>]) -> (nalgebra::DVector<f64>, nalgebra::DMatrix<f64>) {

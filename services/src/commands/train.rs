@@ -325,13 +325,17 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
 }
 
 /// The train split tokenized by the shipped tokenizer, and the card fields that describe it.
-fn token_clips(common: &Common, tokenizer: &str) -> Result<(Vec<TokenClip>, DataRecord, RvqConfig, usize)> {
+fn token_clips(
+    common: &Common,
+    tokenizer: &str,
+    decoded: bool,
+) -> Result<(Vec<TokenClip>, DataRecord, RvqConfig, usize)> {
     let clips = load(common)?;
     let train_clips: Vec<&data::ModelClip> = clips.iter().filter(|c| c.split == Split::Train).collect();
     let mut encoder = CachedEncoder::new(common.store.encoder()?);
     let (mut tat, _) = shipped::load_tat(&common.out_dir, tokenizer, &mut encoder)?;
     eprintln!("tokenizing {} training clips with {tokenizer}", train_clips.len());
-    let tokens = generation::token_clips(&train_clips, &mut tat, &mut encoder)?;
+    let tokens = generation::token_clips(&train_clips, &mut tat, &mut encoder, decoded)?;
     let record = data::data_record(&common.manifest, &train_clips);
     Ok((tokens, record, tat.config().rvq, tat.config().owo.dim))
 }
@@ -348,7 +352,7 @@ fn step_settings(common: &Common, steps: u64, lr: f64, batch_size: usize) -> tra
 }
 
 fn evaluator(args: EvaluatorArgs) -> Result<()> {
-    let (clips, record, rvq, _) = token_clips(&args.common, &args.tokenizer)?;
+    let (clips, record, rvq, _) = token_clips(&args.common, &args.tokenizer, true)?;
     let config = EvaluatorConfig::new(rvq.dim);
     let mut model = Evaluator::new(config, args.common.seed)?;
     eprintln!("evaluator: {} parameters", model.params().count());
@@ -374,7 +378,7 @@ fn evaluator(args: EvaluatorArgs) -> Result<()> {
 }
 
 fn generator(args: GeneratorArgs) -> Result<()> {
-    let (clips, record, rvq, skeleton_dim) = token_clips(&args.common, &args.tokenizer)?;
+    let (clips, record, rvq, skeleton_dim) = token_clips(&args.common, &args.tokenizer, false)?;
     let kind = match args.kind {
         GeneratorKind::Masked => Kind::Masked,
         GeneratorKind::Autoregressive => Kind::Autoregressive,

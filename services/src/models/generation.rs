@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use anymo_generator::{Evaluator, EvaluatorConfig, Generator, GeneratorConfig, TokenClip};
 use anymo_tokenizer::nn::ModelCard;
 use anymo_tokenizer::tat::Tat;
-use anymo_tokenizer::tat::window::encode_whole;
+use anymo_tokenizer::tat::window::{detokenize, encode_whole};
 use anymo_tokenizer::text::CachedEncoder;
 use std::path::Path;
 
@@ -21,8 +21,14 @@ pub fn is_human(subject: &str) -> bool {
     HUMAN_SUBJECTS.contains(&subject)
 }
 
-/// Tokenizes clips whole with TAT and embeds their captions and skeletons.
-pub fn token_clips(clips: &[&ModelClip], tat: &mut Tat, encoder: &mut CachedEncoder) -> Result<Vec<TokenClip>> {
+/// Tokenizes clips whole with TAT and embeds their captions and skeletons; with `decoded`, also
+/// the latents of each clip's codes decoded and encoded again (for the evaluator).
+pub fn token_clips(
+    clips: &[&ModelClip],
+    tat: &mut Tat,
+    encoder: &mut CachedEncoder,
+    decoded: bool,
+) -> Result<Vec<TokenClip>> {
     let mut out = Vec::with_capacity(clips.len());
     for clip in clips {
         let captions =
@@ -32,6 +38,12 @@ pub fn token_clips(clips: &[&ModelClip], tat: &mut Tat, encoder: &mut CachedEnco
         let graph = Graphs::new(encoder).of(clip.motion.skeleton())?;
         let skeleton = tat.skeleton_embedding(&graph)?;
         let encoded = encode_whole(tat, &graph, &clip.motion)?;
+        let decoded_latent = if decoded {
+            let motion = detokenize(tat, &encoded.tokens, &graph, clip.motion.skeleton())?;
+            encode_whole(tat, &graph, &motion)?.latent
+        } else {
+            Vec::new()
+        };
         out.push(TokenClip {
             key: clip.item.key.clone(),
             subject: clip.item.subject.clone(),
@@ -40,6 +52,7 @@ pub fn token_clips(clips: &[&ModelClip], tat: &mut Tat, encoder: &mut CachedEnco
             skeleton,
             codes: encoded.tokens.codes.into_iter().next().unwrap_or_default(),
             latent: encoded.latent,
+            decoded_latent,
         });
     }
     Ok(out)

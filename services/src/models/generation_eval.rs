@@ -9,6 +9,7 @@ use super::evaluate::{CONTACT_HEIGHT, FOOT_BAND};
 use super::generation::{is_human, token_clips};
 use anyhow::Result;
 use anymo_generator::evaluator::{fid, mm_dist, r_precision};
+use anymo_generator::generate::Codes;
 use anymo_generator::sampling::Sampling;
 use anymo_generator::{Evaluator, Generator, Request};
 use anymo_tokenizer::features::foot_joints;
@@ -22,6 +23,9 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
+
+/// The row of the real clips' own tokens decoded: the tokenizer's ceiling for any generator.
+pub const TOKENIZER_ROW: &str = "GT tokens";
 
 /// R-Precision's group size (one true caption among 31 others).
 pub const GROUP: usize = 32;
@@ -74,7 +78,7 @@ pub fn evaluate(
     sampling: Sampling,
     seed: u64,
 ) -> Result<Vec<Row>> {
-    let mut clips = token_clips(test, tat, encoder)?;
+    let mut clips = token_clips(test, tat, encoder, false)?;
     let mut order: Vec<usize> = (0..clips.len()).collect();
     order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
     clips = order.iter().map(|&i| clips[i].clone()).collect();
@@ -98,26 +102,39 @@ pub fn evaluate(
     }
     let mut rows = table("GT", &truth, &truth, 0.0);
 
+    // Each model's codes (or the real clip's own, for the tokenizer's row) decoded on the clip's
+    // skeleton, re-encoded and scored like the real motion.
+    let mut score = |codes: Codes, i: usize, tat: &mut Tat| -> Result<Scored> {
+        let skeleton = motions[i].motion.skeleton();
+        let graph = Graphs::new(encoder).of(skeleton)?;
+        let tokens = Tokens::whole(codes, per_token, motions[i].motion.fps());
+        let motion = detokenize(tat, &tokens, &graph, skeleton)?;
+        let encoded = encode_whole(tat, &graph, &motion)?;
+        let (fs, gp) = foot_figures(&motion);
+        Ok(Scored {
+            motion: evaluator.embed_one(&encoded.latent)?,
+            text: truth[i].text.clone(),
+            fs,
+            gp,
+            human: truth[i].human,
+        })
+    };
+    let started = Instant::now();
+    let mut decoded = Vec::with_capacity(clips.len());
+    for (i, clip) in clips.iter().enumerate() {
+        decoded.push(score(clip.codes[..clip.steps().min(max)].to_vec(), i, tat)?);
+    }
+    let seconds = started.elapsed().as_secs_f64() / clips.len().max(1) as f64;
+    rows.extend(table(TOKENIZER_ROW, &decoded, &truth, seconds));
+
     for (name, generator) in generators {
         let started = Instant::now();
         let mut generated = Vec::with_capacity(clips.len());
-        for (i, (clip, model_clip)) in clips.iter().zip(&motions).enumerate() {
+        for (i, clip) in clips.iter().enumerate() {
             let steps = clip.steps().min(max).min(generator.config().max_tokens());
             let request = Request { steps: Some(steps), samples: 1, sampling, seed: seed.wrapping_add(i as u64) };
             let codes = generator.generate(&clip.text[0], &clip.skeleton, &request)?.remove(0);
-            let skeleton = model_clip.motion.skeleton();
-            let graph = Graphs::new(encoder).of(skeleton)?;
-            let tokens = Tokens::whole(codes, per_token, model_clip.motion.fps());
-            let motion = detokenize(tat, &tokens, &graph, skeleton)?;
-            let encoded = encode_whole(tat, &graph, &motion)?;
-            let (fs, gp) = foot_figures(&motion);
-            generated.push(Scored {
-                motion: evaluator.embed_one(&encoded.latent)?,
-                text: truth[i].text.clone(),
-                fs,
-                gp,
-                human: truth[i].human,
-            });
+            generated.push(score(codes, i, tat)?);
         }
         let seconds = started.elapsed().as_secs_f64() / clips.len().max(1) as f64;
         rows.extend(table(name, &generated, &truth, seconds));
