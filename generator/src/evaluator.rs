@@ -255,4 +255,36 @@ mod tests {
         assert_eq!(r[2], 1.0);
         assert!((mm_dist(&motions, &texts) - distance(&[0.1, 0.9], &[1.0, 0.0]) / 3.0).abs() < 1e-6);
     }
+
+    #[test]
+    fn every_parameter_learns_and_matching_pairs_lower_the_loss() {
+        let config = EvaluatorConfig {
+            latent_dim: 4,
+            dim: 8,
+            layers: 1,
+            heads: 2,
+            ff: 16,
+            embed: 4,
+            max_tokens: 6,
+            temperature: 0.1,
+        };
+        let e = Evaluator::new(config, 2).unwrap();
+        let latent =
+            Tensor::from_vec((0..3 * 5 * 4).map(|i| (i as f32 * 0.3).sin()).collect(), (3, 5, 4), &Device::Cpu)
+                .unwrap();
+        let text =
+            Tensor::from_vec((0..3 * TEXT_DIM).map(|i| (i as f32 * 0.7).cos()).collect(), (3, TEXT_DIM), &Device::Cpu)
+                .unwrap();
+        let same = vec![vec![false; 3]; 3];
+        let loss = e.loss(&latent, &text, &same).unwrap();
+        let grads = loss.backward().unwrap();
+        for (name, var) in e.params().vars() {
+            let g = grads.get(var.as_tensor()).map(|t| t.abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap());
+            assert!(g.is_some_and(|v| v > 0.0), "no gradient reaches {name}");
+        }
+        // Marking every pair as the same caption leaves no negatives: the loss is zero.
+        let all_same = vec![vec![true; 3]; 3];
+        let none = e.loss(&latent, &text, &all_same).unwrap().to_scalar::<f32>().unwrap();
+        assert!(none.abs() < 1e-4, "{none}");
+    }
 }

@@ -350,3 +350,94 @@ impl Generator {
         self.residual.sample(condition, &base, &residual_known, sampling, rng)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::condition::TEXT_DIM;
+
+    fn tiny(kind: Kind) -> Generator {
+        let mut config = GeneratorConfig::new(kind, 8, 3, 16);
+        for trunk in [&mut config.base, &mut config.residual] {
+            *trunk = TrunkConfig { dim: 16, layers: 1, heads: 2, ff: 32, max_tokens: 8, skeleton_dim: 8 };
+        }
+        config.length_hidden = 16;
+        config.decoding_steps = 4;
+        Generator::new(config, 3).unwrap()
+    }
+
+    fn request(samples: usize) -> Request {
+        Request { steps: Some(5), samples, sampling: Sampling::default(), seed: 11 }
+    }
+
+    #[test]
+    fn edits_keep_what_they_are_given_for_both_kinds() {
+        let text = vec![0.05; TEXT_DIM];
+        let skeleton = vec![0.1; 8];
+        for kind in [Kind::Masked, Kind::Autoregressive] {
+            let g = tiny(kind);
+            let clip: Codes = (0..6).map(|t| vec![t as u32, (t * 2) as u32, 15 - t as u32]).collect();
+            let keep = [true, true, false, false, true, true];
+            for sample in g.inpaint(&text, &skeleton, &clip, &keep, &request(2)).unwrap() {
+                assert_eq!(sample.len(), 6);
+                for t in [0, 1, 4, 5] {
+                    assert_eq!(sample[t], clip[t], "{kind:?} kept step {t}");
+                }
+                assert!(sample.iter().all(|s| s.len() == 3 && s.iter().all(|&c| c < 16)));
+            }
+            // Longer than one pass (8 steps): the window slides and the clip stays a prefix.
+            let longer = g.extend(&text, &skeleton, &clip, 9, &request(1)).unwrap().remove(0);
+            assert_eq!(longer.len(), 15);
+            assert_eq!(longer[..6], clip[..]);
+            let chained = g.chain(&[(&text, 3), (&text, 4)], &skeleton, &request(1)).unwrap().remove(0);
+            assert_eq!(chained.len(), 7);
+        }
+    }
+
+    #[test]
+    fn samples_are_seeded_one_by_one_and_bad_requests_are_refused() {
+        let g = tiny(Kind::Masked);
+        let (text, skeleton) = (vec![0.05; TEXT_DIM], vec![0.1; 8]);
+        let one = g.generate(&text, &skeleton, &request(1)).unwrap();
+        let three = g.generate(&text, &skeleton, &request(3)).unwrap();
+        assert_eq!(one[0], three[0]);
+        assert_eq!(three.len(), 3);
+        assert!(matches!(g.generate(&text, &skeleton, &request(0)), Err(GenerationError::Empty)));
+        let foreign: Codes = vec![vec![99, 0, 0]];
+        assert!(matches!(
+            g.inpaint(&text, &skeleton, &foreign, &[false], &request(1)),
+            Err(GenerationError::CodesDoNotFit { layers: 3, codes: 16 })
+        ));
+        let predicted = g.predict_steps(&text, &skeleton).unwrap();
+        assert!((1..=8).contains(&predicted));
+    }
+
+    #[test]
+    fn every_parameter_learns() {
+        for kind in [Kind::Masked, Kind::Autoregressive] {
+            let g = tiny(kind);
+            let codes: Vec<Codes> =
+                (0..4).map(|r| (0..5).map(|t| vec![(r + t) as u32 % 16, t as u32, r as u32]).collect()).collect();
+            let text: Vec<Vec<f32>> = (0..4).map(|r| vec![0.01 * r as f32; TEXT_DIM]).collect();
+            let text: Vec<&[f32]> = text.iter().map(Vec::as_slice).collect();
+            let skeleton = vec![0.2f32; 8];
+            let skeletons = vec![skeleton.as_slice(); 4];
+            let mut learned = std::collections::BTreeSet::new();
+            for seed in 0..8 {
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+                let (loss, _) = g.loss(&codes, &text, &skeletons, &[5, 6, 7, 9], &mut rng).unwrap();
+                let grads = loss.backward().unwrap();
+                for (name, var) in g.params().vars() {
+                    let grad = grads
+                        .get(var.as_tensor())
+                        .map(|t| t.abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap());
+                    if grad.is_some_and(|v| v > 0.0) {
+                        learned.insert(name.clone());
+                    }
+                }
+            }
+            let missing: Vec<&String> = g.params().vars().map(|(n, _)| n).filter(|n| !learned.contains(*n)).collect();
+            assert!(missing.is_empty(), "{kind:?}: no gradient reaches {missing:?}");
+        }
+    }
+}
