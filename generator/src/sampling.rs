@@ -17,7 +17,7 @@ pub struct Sampling {
 
 impl Default for Sampling {
     fn default() -> Sampling {
-        Sampling { temperature: 1.0, top_k: 0, guidance: 4.0 }
+        Sampling { temperature: 0.7, top_k: 0, guidance: 2.0 }
     }
 }
 

@@ -164,6 +164,12 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
         assert_eq!(joints, shape(skeleton).0, "{}", skeleton.display());
         assert_eq!(frames, 120, "4 seconds at 30 fps");
     }
+    // The shipped generator works on a clean clone, with no checkpoint options.
+    let shipped_out = dir.join("shipped.bvh");
+    let mut a = args(&["generate", "a horse gallops", "--skeleton", &horse.to_string_lossy(), "--seconds", "3"]);
+    a.extend(args(&["-o", &shipped_out.to_string_lossy()]));
+    ok(anymo(&models, &a).env_remove("ANYMO_CHECKPOINTS").output().unwrap());
+    assert_eq!(shape(&shipped_out), (shape(&horse).0, 90));
     // Seeds repeat; several samples land beside each other.
     let (one, two) = (dir.join("one.bvh"), dir.join("two.bvh"));
     ok(generate(&human, &one, &["--seconds", "2", "--seed", "3"]));

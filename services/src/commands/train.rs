@@ -48,7 +48,7 @@ struct EvaluatorArgs {
     #[arg(long, default_value = "tat")]
     tokenizer: String,
     /// Optimiser steps.
-    #[arg(long, default_value_t = 3000)]
+    #[arg(long, default_value_t = 2000)]
     steps: u64,
     /// Clips per batch (the contrastive negatives).
     #[arg(long, default_value_t = 64)]
