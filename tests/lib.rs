@@ -74,3 +74,46 @@ pub fn reference_files(env: &str, fixture: &str) -> Vec<PathBuf> {
     assert!(!refs.is_empty(), "no references in {}", dir.display());
     refs
 }
+
+/// Asserts that a command succeeded, showing its standard error when it did not.
+pub fn succeeded(out: std::process::Output) -> std::process::Output {
+    assert!(out.status.success(), "command failed: {}", String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+/// Every tensor of a safetensors file, flattened, sorted by name (to compare checkpoints).
+pub fn safetensors_values(path: &Path) -> Vec<(String, Vec<f32>)> {
+    let mut all: Vec<(String, Vec<f32>)> = candle_core::safetensors::load(path, &candle_core::Device::Cpu)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .into_iter()
+        .map(|(k, t)| (k, t.flatten_all().expect("flatten").to_vec1().expect("f32 values")))
+        .collect();
+    all.sort_by(|a, b| a.0.cmp(&b.0));
+    all
+}
+
+/// Writes the decompressed contents of a `.gz` file to `to`.
+pub fn gunzip(from: &Path, to: &Path) {
+    use std::io::Read;
+    let mut text = Vec::new();
+    flate2::read::MultiGzDecoder::new(std::fs::File::open(from).expect("a readable .gz"))
+        .read_to_end(&mut text)
+        .expect("valid gzip");
+    std::fs::write(to, text).expect("a writable scratch file");
+}
+
+/// Waits (up to 10 minutes) until a training run's saved state reaches `step`.
+pub fn wait_for_saved_step(state: &Path, step: u64) {
+    let started = std::time::Instant::now();
+    loop {
+        let done = std::fs::read_to_string(state)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["step"].as_u64())
+            .unwrap_or(0);
+        if done >= step || started.elapsed() > std::time::Duration::from_secs(600) {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}

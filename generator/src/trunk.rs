@@ -92,6 +92,8 @@ fn causal_mask(n: usize) -> Result<Tensor> {
 /// Mean cross-entropy of `logits (N, C)` against `targets`, over rows with a non-zero `weight`.
 pub fn cross_entropy(logits: &Tensor, targets: &[u32], weight: &[f32]) -> Result<Tensor> {
     let n = targets.len();
+    // candle-nn's log_softmax is built from max, exp, sum and log, all with a backward pass
+    // (unlike the fused softmax_last_dim); the gradient tests cover it.
     let log_probs = candle_nn::ops::log_softmax(logits, D::Minus1)?;
     let targets = Tensor::from_slice(targets, (n, 1), &Device::Cpu)?;
     let picked = log_probs.gather(&targets, 1)?.squeeze(1)?;

@@ -3,11 +3,12 @@
 //! which must end exactly where an uninterrupted run ends), the generation evaluation, and
 //! `generate` / `edit` on a human, a quadruped and a zero-shot skeleton.
 
-use anymo_tests::{data_dir, models_dir, scratch_dir};
+use anymo_tests::{
+    data_dir, gunzip, models_dir, safetensors_values as tensors, scratch_dir, succeeded as ok, wait_for_saved_step,
+};
 use anymo_tokenizer::bvh::{self, ReadOptions};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::time::{Duration, Instant};
 
 fn anymo(models: &Path, args: &[String]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_anymo"));
@@ -15,30 +16,8 @@ fn anymo(models: &Path, args: &[String]) -> Command {
     c
 }
 
-fn ok(out: Output) -> Output {
-    assert!(out.status.success(), "anymo failed: {}", String::from_utf8_lossy(&out.stderr));
-    out
-}
-
 fn args(parts: &[&str]) -> Vec<String> {
     parts.iter().map(|s| s.to_string()).collect()
-}
-
-fn tensors(path: &Path) -> Vec<(String, Vec<f32>)> {
-    let mut all: Vec<(String, Vec<f32>)> = candle_core::safetensors::load(path, &candle_core::Device::Cpu)
-        .unwrap()
-        .into_iter()
-        .map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1().unwrap()))
-        .collect();
-    all.sort_by(|a, b| a.0.cmp(&b.0));
-    all
-}
-
-fn gunzip(from: &Path, to: &Path) {
-    use std::io::Read;
-    let mut text = Vec::new();
-    flate2::read::MultiGzDecoder::new(std::fs::File::open(from).unwrap()).read_to_end(&mut text).unwrap();
-    std::fs::write(to, text).unwrap();
 }
 
 /// A joint as outputs must keep it: name, parent, offset.
@@ -49,21 +28,6 @@ fn shape(path: &Path) -> (Vec<Joint>, usize) {
     let clip = bvh::read_path(path, ReadOptions::default()).unwrap();
     let joints = clip.skeleton().joints().iter().map(|j| (j.name.clone(), j.parent, j.offset.to_array())).collect();
     (joints, clip.frames())
-}
-
-fn wait_for_step(state: &Path, step: u64) {
-    let started = Instant::now();
-    loop {
-        let done = std::fs::read_to_string(state)
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["step"].as_u64())
-            .unwrap_or(0);
-        if done >= step || started.elapsed() > Duration::from_secs(600) {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 #[test]
@@ -91,7 +55,7 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     let masked = |name: &str| train("generator", name, &[&["--name", name][..], &tiny].concat());
     ok(anymo(&models, &masked("straight")).output().unwrap());
     let mut child = anymo(&models, &masked("killed")).stderr(std::process::Stdio::null()).spawn().unwrap();
-    wait_for_step(&dir.join("runs/killed/state.json"), 2);
+    wait_for_saved_step(&dir.join("runs/killed/state.json"), 2);
     child.kill().unwrap();
     child.wait().unwrap();
     let resumed = ok(anymo(&models, &masked("killed")).output().unwrap());

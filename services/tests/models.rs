@@ -3,11 +3,12 @@
 //! where an uninterrupted run ends), the evaluation, and tokenize / detokenize / transfer on real
 //! files with the output keeping the target's hierarchy.
 
-use anymo_tests::{data_dir, models_dir, scratch_dir};
+use anymo_tests::{
+    data_dir, gunzip, models_dir, safetensors_values as tensors, scratch_dir, succeeded as ok, wait_for_saved_step,
+};
 use anymo_tokenizer::bvh::{self, ReadOptions};
 use std::path::Path;
-use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::process::Command;
 
 fn anymo(models: &Path, args: &[&str]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_anymo"));
@@ -15,23 +16,8 @@ fn anymo(models: &Path, args: &[&str]) -> Command {
     c
 }
 
-fn ok(out: Output) -> Output {
-    assert!(out.status.success(), "anymo failed: {}", String::from_utf8_lossy(&out.stderr));
-    out
-}
-
 fn strs(v: &[String]) -> Vec<&str> {
     v.iter().map(String::as_str).collect()
-}
-
-fn tensors(path: &Path) -> Vec<(String, Vec<f32>)> {
-    let mut all: Vec<(String, Vec<f32>)> = candle_core::safetensors::load(path, &candle_core::Device::Cpu)
-        .unwrap()
-        .into_iter()
-        .map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1().unwrap()))
-        .collect();
-    all.sort_by(|a, b| a.0.cmp(&b.0));
-    all
 }
 
 /// A joint as the output must keep it: name, parent, offset, channels.
@@ -51,13 +37,6 @@ fn hierarchy(path: &Path) -> Vec<JointShape> {
             )
         })
         .collect()
-}
-
-fn gunzip(from: &Path, to: &Path) {
-    use std::io::Read;
-    let mut text = Vec::new();
-    flate2::read::MultiGzDecoder::new(std::fs::File::open(from).unwrap()).read_to_end(&mut text).unwrap();
-    std::fs::write(to, text).unwrap();
 }
 
 #[test]
@@ -91,19 +70,7 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     };
     ok(anymo(&models, &strs(&tat("straight"))).output().unwrap());
     let mut child = anymo(&models, &strs(&tat("killed"))).stderr(std::process::Stdio::null()).spawn().unwrap();
-    let state = dir.join("runs/killed/state.json");
-    let started = Instant::now();
-    loop {
-        let step = std::fs::read_to_string(&state)
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["step"].as_u64())
-            .unwrap_or(0);
-        if step >= 2 || started.elapsed() > Duration::from_secs(600) {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_saved_step(&dir.join("runs/killed/state.json"), 2);
     child.kill().unwrap();
     child.wait().unwrap();
     let resumed = ok(anymo(&models, &strs(&tat("killed"))).output().unwrap());

@@ -189,6 +189,14 @@ impl Motion {
         &self.translations[frame * j..(frame + 1) * j]
     }
 
+    /// One frame of the skeleton's rest pose (no rotation, translations at the offsets): the
+    /// motion a bare skeleton is cleaned and animated through.
+    pub fn rest_pose(skeleton: &Skeleton, frame_time: f64) -> Motion {
+        let translations = skeleton.joints().iter().map(|j| j.offset).collect();
+        Motion::new(skeleton.clone(), frame_time, vec![Quat::IDENTITY; skeleton.len()], translations)
+            .expect("one rotation and one translation per joint")
+    }
+
     /// Frames `first..first + count` (clamped to the clip) as a motion of their own.
     pub fn slice(&self, first: usize, count: usize) -> Motion {
         let j = self.skeleton().len();

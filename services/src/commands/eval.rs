@@ -2,8 +2,8 @@
 //! zero-shot splits, per source, and TAT's zero-shot transfer figures.
 
 use super::context::StoreArgs;
+use super::generate::SamplingArgs;
 use anyhow::{Context, Result};
-use anymo_generator::sampling::Sampling;
 use anymo_services::models::codecs::{self, Graphs};
 use anymo_services::models::data::{self, ModelClip};
 use anymo_services::models::evaluate::{self, Sums, TransferScores};
@@ -45,12 +45,8 @@ struct GeneratorArgs {
     /// Seed of the clip order and of sampling.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Classifier-free guidance scale.
-    #[arg(long, default_value_t = Sampling::default().guidance)]
-    guidance: f32,
-    /// Sampling temperature.
-    #[arg(long, default_value_t = Sampling::default().temperature)]
-    temperature: f32,
+    #[command(flatten)]
+    sampling: SamplingArgs,
     /// The checkpoints' folder.
     #[arg(long, default_value_os_t = shipped::default_dir())]
     dir: PathBuf,
@@ -256,7 +252,7 @@ fn generator(args: GeneratorArgs) -> Result<()> {
         loaded.push((name.clone(), generator));
     }
     let refs: Vec<(String, &anymo_generator::Generator)> = loaded.iter().map(|(n, g)| (n.clone(), g)).collect();
-    let sampling = Sampling { guidance: args.guidance, temperature: args.temperature, ..Sampling::default() };
+    let sampling = args.sampling.sampling();
     let rows = generation_eval::evaluate(&mut tat, &evaluator, &refs, &test, &mut encoder, sampling, args.seed)?;
     let mut table = String::from(
         "| model | clips | R@1 | R@2 | R@3 | FID | MM-Dist | FS | GP | s/clip |\n|---|---|---|---|---|---|---|---|---|---|\n",

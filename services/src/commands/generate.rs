@@ -30,6 +30,15 @@ pub struct GenerationArgs {
     /// Seed: the same request and seed give the same motion.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    #[command(flatten)]
+    sampling: SamplingArgs,
+    #[command(flatten)]
+    store: StoreArgs,
+}
+
+/// How tokens are drawn (shared with `anymo eval generator`).
+#[derive(clap::Args, Clone)]
+pub struct SamplingArgs {
     /// Classifier-free guidance scale (1: none).
     #[arg(long, default_value_t = Sampling::default().guidance)]
     guidance: f32,
@@ -39,8 +48,13 @@ pub struct GenerationArgs {
     /// Draw only among the k most likely tokens (0: all).
     #[arg(long, default_value_t = 0)]
     top_k: usize,
-    #[command(flatten)]
-    store: StoreArgs,
+}
+
+impl SamplingArgs {
+    /// The sampling these options ask for.
+    pub fn sampling(&self) -> Sampling {
+        Sampling { temperature: self.temperature, top_k: self.top_k, guidance: self.guidance }
+    }
 }
 
 #[derive(Parser)]
@@ -131,8 +145,7 @@ fn load(args: &GenerationArgs) -> Result<(Studio, Request)> {
         bail!("--samples must be at least 1");
     }
     let studio = Studio::load(&args.checkpoints, &args.model, args.store.encoder()?)?;
-    let sampling = Sampling { temperature: args.temperature, top_k: args.top_k, guidance: args.guidance };
-    Ok((studio, Request { steps: None, samples: args.samples, sampling, seed: args.seed }))
+    Ok((studio, Request { steps: None, samples: args.samples, sampling: args.sampling.sampling(), seed: args.seed }))
 }
 
 fn read_skeleton(path: &Path) -> Result<Skeleton> {

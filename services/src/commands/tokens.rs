@@ -116,13 +116,7 @@ fn read_clip(path: &Path, animation: Option<&str>) -> Result<(Motion, CleanClip)
 fn read_target(path: &Path) -> Result<(Motion, CleanClip)> {
     let clip =
         bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
-    let skeleton = clip.skeleton().clone();
-    let rest = Motion::new(
-        skeleton.clone(),
-        1.0 / MODEL_FPS,
-        vec![glam::Quat::IDENTITY; skeleton.len()],
-        skeleton.joints().iter().map(|j| j.offset).collect(),
-    )?;
+    let rest = Motion::rest_pose(clip.skeleton(), 1.0 / MODEL_FPS);
     let cleaned = clean(&rest, &CleanOptions::default())
         .map_err(|r| anyhow!("{} cannot be used as a target: {r}", path.display()))?;
     Ok((rest, cleaned))

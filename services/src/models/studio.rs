@@ -76,12 +76,7 @@ impl Studio {
 
     /// A skeleton to animate, from any skeleton (its rest pose is its offsets).
     pub fn target(&mut self, skeleton: &Skeleton) -> Result<Target> {
-        let rest = Motion::new(
-            skeleton.clone(),
-            1.0 / MODEL_FPS,
-            vec![glam::Quat::IDENTITY; skeleton.len()],
-            skeleton.joints().iter().map(|j| j.offset).collect(),
-        )?;
+        let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
         let cleaned =
             clean(&rest, &CleanOptions::default()).map_err(|r| anyhow!("the skeleton cannot be animated: {r}"))?;
         self.prepare(rest, cleaned)
