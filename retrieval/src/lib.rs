@@ -1,9 +1,19 @@
-//! Motion search. So far: the vector index (exact scan behind a trait, persisted, updated in
-//! place) and reciprocal rank fusion. The tantivy full-text side, filters over clip metadata and
-//! the `anymo search` command come with the rest of the search issue.
+//! Motion search: a tantivy full-text index and exact vector indexes (caption embeddings and
+//! motion embeddings) over a motion library, fused by reciprocal rank fusion under metadata
+//! filters, persisted on disk and updated in place. The crate knows nothing of the store or of
+//! the models that make the vectors; `anymo-services` feeds it.
 
+pub mod document;
+pub mod filter;
 pub mod fusion;
+pub mod library;
+pub mod metrics;
+pub mod text;
 pub mod vector;
 
+pub use document::ClipDocument;
+pub use filter::Filter;
 pub use fusion::reciprocal_rank_fusion;
+pub use library::{Entry, Found, Library, Page, Query, Ranks, SearchError, Space, Spaces, Weights};
+pub use text::Snippet;
 pub use vector::{ExactIndex, Hit, IndexError, VectorIndex};

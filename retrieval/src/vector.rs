@@ -118,6 +118,21 @@ impl ExactIndex {
         ExactIndex { dim, ids: Vec::new(), vectors: Vec::new(), slots: HashMap::new() }
     }
 
+    /// Whether clip `id` has a vector.
+    pub fn contains(&self, id: u64) -> bool {
+        self.slots.contains_key(&id)
+    }
+
+    /// Clip `id`'s vector.
+    pub fn get(&self, id: u64) -> Option<&[f32]> {
+        self.slots.get(&id).map(|&slot| &self.vectors[slot * self.dim..(slot + 1) * self.dim])
+    }
+
+    /// The clip ids held, in storage order.
+    pub fn ids(&self) -> impl Iterator<Item = u64> + '_ {
+        self.ids.iter().copied()
+    }
+
     fn check(&self, id: u64, vector: &[f32]) -> Result<(), IndexError> {
         if vector.len() != self.dim {
             return Err(IndexError::Dimension { expected: self.dim, got: vector.len() });
@@ -281,6 +296,8 @@ mod tests {
         index.upsert(3, &[0.6, 0.8]).unwrap();
         index.upsert(1, &[-1.0, 0.0]).unwrap();
         assert_eq!(index.len(), 3);
+        assert_eq!(index.get(1), Some(&[-1.0, 0.0][..]));
+        assert_eq!(index.get(7), None);
         let ids = |hits: Vec<Hit>| hits.into_iter().map(|h| h.id).collect::<Vec<_>>();
         assert_eq!(ids(index.search(&[1.0, 0.0], 3, &|_| true).unwrap()), vec![3, 2, 1]);
         assert_eq!(ids(index.search(&[1.0, 0.0], 3, &|id| id != 3).unwrap()), vec![2, 1]);

@@ -137,6 +137,19 @@ pub struct ClipRow {
     pub captions: Vec<String>,
 }
 
+/// What the search index needs of a stored clip.
+#[derive(Debug)]
+pub struct IndexRecord {
+    /// The clip.
+    pub clip: ClipRow,
+    /// Its skeleton's topology fingerprint.
+    pub fingerprint: String,
+    /// Its skeleton's joint labels.
+    pub joint_labels: Vec<String>,
+    /// Embeddings of its captions, in caption order.
+    pub caption_embeddings: Vec<Vec<f32>>,
+}
+
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> i64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
@@ -145,6 +158,11 @@ pub fn now_ms() -> i64 {
 /// Little-endian bytes of an f32 array.
 pub fn to_blob(values: &[f32]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+/// The f32 array of little-endian bytes written by [`to_blob`].
+pub fn from_blob(bytes: &[u8]) -> Vec<f32> {
+    bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
 }
 
 impl Store {
@@ -397,6 +415,39 @@ impl Store {
             .map(|c| c.try_get(0))
             .collect::<Result<Vec<String>, _>>()?;
         Ok(Some(clip_row(&r, captions)?))
+    }
+
+    /// Every clip id, ascending.
+    pub async fn clip_ids(&self) -> Result<Vec<i64>, StoreError> {
+        sqlx::query("SELECT id FROM clips ORDER BY id")
+            .fetch_all(&self.pool)
+            .await?
+            .iter()
+            .map(|r| Ok(r.try_get(0)?))
+            .collect()
+    }
+
+    /// A clip with its skeleton's fingerprint and labels and its caption embeddings.
+    pub async fn index_record(&self, id: i64) -> Result<Option<IndexRecord>, StoreError> {
+        let Some(clip) = self.clip(id).await? else { return Ok(None) };
+        let skeleton = sqlx::query("SELECT fingerprint, labels FROM skeletons WHERE id = $1")
+            .bind(clip.skeleton_id)
+            .fetch_one(&self.pool)
+            .await?;
+        let labels: String = skeleton.try_get(1)?;
+        let caption_embeddings = sqlx::query("SELECT embedding FROM captions WHERE clip_id = $1 ORDER BY position")
+            .bind(id)
+            .fetch_all(&self.pool)
+            .await?
+            .iter()
+            .map(|r| Ok(from_blob(&r.try_get::<Vec<u8>, _>(0)?)))
+            .collect::<Result<Vec<_>, StoreError>>()?;
+        Ok(Some(IndexRecord {
+            fingerprint: skeleton.try_get(0)?,
+            joint_labels: serde_json::from_str(&labels).map_err(|e| StoreError::Corrupt(e.to_string()))?,
+            caption_embeddings,
+            clip,
+        }))
     }
 
     /// A clip's BVH text as ingested.

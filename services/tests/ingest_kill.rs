@@ -12,6 +12,7 @@ fn ingest(folder: &Path, data: &Path, models: &Path) -> Command {
     command
         .arg("ingest")
         .arg(folder)
+        .arg("--no-index")
         .arg("--data-dir")
         .arg(data)
         .env("ANYMO_MODELS", models)

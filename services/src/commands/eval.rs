@@ -1,13 +1,16 @@
-//! `anymo eval tokenizer`: the reconstruction table (TAT, baseline, ablations) on the test and
-//! zero-shot splits, per source, and TAT's zero-shot transfer figures.
+//! `anymo eval tokenizer|generator|retrieval`: the tokenizer's reconstruction table (TAT,
+//! baseline, ablations) with its transfer figures, text-to-motion by MoMask's protocol, and
+//! search by EVAL.md's retrieval protocol.
 
 use super::context::StoreArgs;
 use super::generate::SamplingArgs;
+use super::search::WeightArgs;
 use anyhow::{Context, Result};
 use anymo_services::models::codecs::{self, Graphs};
 use anymo_services::models::data::{self, ModelClip};
 use anymo_services::models::evaluate::{self, Sums, TransferScores};
 use anymo_services::models::{generation, generation_eval, shipped};
+use anymo_services::search::{self, SearchModels};
 use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::{Parser, Subcommand};
@@ -26,6 +29,32 @@ enum What {
     Tokenizer(TokenizerArgs),
     /// Text-to-motion on the test split by MoMask's protocol, GT row beside the generators.
     Generator(GeneratorArgs),
+    /// Search on the test split: text -> motion and motion -> motion, per retriever.
+    Retrieval(RetrievalArgs),
+}
+
+#[derive(Parser)]
+struct RetrievalArgs {
+    /// The corpus manifest.
+    #[arg(long, default_value = "../shared/data/manifest.tsv")]
+    manifest: PathBuf,
+    /// The evaluator checkpoint that embeds motions and queries.
+    #[arg(long, default_value = "evaluator")]
+    evaluator: String,
+    /// Use at most this many clips per split.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// The hybrid row's weights.
+    #[command(flatten)]
+    weights: WeightArgs,
+    /// The checkpoints' folder.
+    #[arg(long, default_value_os_t = shipped::default_dir())]
+    dir: PathBuf,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    #[command(flatten)]
+    store: StoreArgs,
 }
 
 #[derive(Parser)]
@@ -91,6 +120,7 @@ pub fn run(args: Args) -> Result<()> {
     match args.what {
         What::Tokenizer(a) => tokenizer(a),
         What::Generator(a) => generator(a),
+        What::Retrieval(a) => retrieval(a),
     }
 }
 
@@ -284,6 +314,31 @@ fn generator(args: GeneratorArgs) -> Result<()> {
             card.save(&card_path)?;
         }
     }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "command": command }))?)?;
+    }
+    Ok(())
+}
+
+fn retrieval(args: RetrievalArgs) -> Result<()> {
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let (clips, rejected) = data::load_manifest(&args.manifest, args.limit)
+        .with_context(|| format!("reading the manifest {}", args.manifest.display()))?;
+    let test: Vec<&ModelClip> = clips.iter().filter(|c| c.split == Split::Test).collect();
+    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
+    let mut models = SearchModels::load(&args.dir, &args.evaluator, args.store.encoder()?)?;
+    let rows = search::evaluate::evaluate(&mut models, &test, args.weights.weights())?;
+    let mut table = String::from(
+        "| task | retrievers | queries | queries' subjects | R@1 | R@5 | R@10 | median rank |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in &rows {
+        let s = &r.summary;
+        table.push_str(&format!(
+            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {} |\n",
+            r.task, r.retrievers, s.queries, r.subset, s.r1, s.r5, s.r10, s.median_rank
+        ));
+    }
+    println!("{table}");
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "command": command }))?)?;
     }

@@ -187,12 +187,6 @@ pub fn run_generate(args: GenerateArgs) -> Result<()> {
     write_all(studio.render(samples, [0.0; 3], frames, &target)?, &args.output)
 }
 
-fn read_motion(path: &Path) -> Result<Motion> {
-    let clip = bvh::read_path(path, bvh::ReadOptions { require_motion: true })
-        .with_context(|| format!("reading {}", path.display()))?;
-    Ok(Motion::from_bvh(&clip))
-}
-
 pub fn run_edit(args: EditArgs) -> Result<()> {
     match args.edit {
         Edit::Inpaint { input, prompt, from, to, output, generation } => {
@@ -200,7 +194,7 @@ pub fn run_edit(args: EditArgs) -> Result<()> {
                 bail!("the span must satisfy 0 <= --from < --to; got {from}..{to}");
             }
             let (mut studio, request) = load(&generation)?;
-            let (target, codes, start) = studio.clip(&read_motion(&input)?)?;
+            let (target, codes, start) = studio.clip(&super::input::read_motion(&input, None)?)?;
             let per = studio.frames_per_token() as f64 / MODEL_FPS;
             let duration = target.cleaned.motion.frames() as f64 / MODEL_FPS;
             if from >= duration {
@@ -216,7 +210,7 @@ pub fn run_edit(args: EditArgs) -> Result<()> {
         Edit::Continue { input, prompt, seconds, output, generation } => {
             let (mut studio, request) = load(&generation)?;
             let extra = studio.steps(seconds)?;
-            let (target, codes, start) = studio.clip(&read_motion(&input)?)?;
+            let (target, codes, start) = studio.clip(&super::input::read_motion(&input, None)?)?;
             let text = studio.text(&prompt)?;
             let samples = studio.generator.extend(&text, &target.embedding, &codes, extra, &request)?;
             let frames = target.cleaned.motion.frames() + (seconds * MODEL_FPS).round() as usize;

@@ -1,8 +1,12 @@
-//! `anymo ingest PATH`: a folder of BVH/GLB files or a manifest TSV into the corpus store.
+//! `anymo ingest PATH`: a folder of BVH/GLB files or a manifest TSV into the corpus store, then
+//! the new clips into the search index.
 
 use super::context::{StoreArgs, runtime};
 use anyhow::{Context, Result};
 use anymo_services::ingest::{Progress, ingest, items_from_folder, items_from_manifest};
+use anymo_services::models::shipped;
+use anymo_services::search::{SearchModels, open_library, sync};
+use anymo_services::store::Store;
 use anymo_tokenizer::text::CachedEncoder;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -15,6 +19,15 @@ pub struct Args {
     /// Threads reading and cleaning clips.
     #[arg(long, default_value_t = 2)]
     threads: usize,
+    /// Leave the search index as it is (the next `anymo search` brings it up to date).
+    #[arg(long)]
+    no_index: bool,
+    /// The evaluator checkpoint that embeds motions for search.
+    #[arg(long, default_value = "evaluator")]
+    evaluator: String,
+    /// The checkpoints' folder.
+    #[arg(long, default_value_os_t = shipped::default_dir())]
+    checkpoints: PathBuf,
     #[command(flatten)]
     store: StoreArgs,
 }
@@ -57,6 +70,35 @@ pub fn run(args: Args) -> Result<()> {
         for p in paths.iter().take(3) {
             println!("      {p}");
         }
+    }
+    if !args.no_index {
+        update_index(&args, &runtime, &store)?;
+    }
+    Ok(())
+}
+
+/// Indexes the clips the search index lacks.
+fn update_index(args: &Args, runtime: &tokio::runtime::Runtime, store: &Store) -> Result<()> {
+    let mut models = SearchModels::load(&args.checkpoints, &args.evaluator, args.store.encoder()?)
+        .context("loading the search models (use --no-index to ingest without updating the search index)")?;
+    let mut library = open_library(&args.store.data_dir, &models)?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(ProgressStyle::with_template("indexing {bar:40} {pos}/{len} clips eta {eta}").expect("a template"));
+    let start = Instant::now();
+    let report = runtime.block_on(sync(store, &mut library, &mut models, &mut |done, todo| {
+        bar.set_length(todo as u64);
+        bar.set_position(done as u64);
+    }))?;
+    bar.finish_and_clear();
+    println!(
+        "search index: {} clips indexed, {} removed in {:.1} s; {} clips searchable",
+        report.indexed,
+        report.removed,
+        start.elapsed().as_secs_f64(),
+        library.len()
+    );
+    for problem in &report.without_motion {
+        println!("  {problem}");
     }
     Ok(())
 }

@@ -52,3 +52,17 @@ pub fn read(path: &Path, animation: Option<&str>, fps: Option<f64>, order: Euler
         Ok(Input::Bvh(clip))
     }
 }
+
+/// The motion of a clip file (BVH, or a glTF file's `animation`, default its first), refused
+/// when it has no frames.
+pub fn read_motion(path: &Path, animation: Option<&str>) -> Result<Motion> {
+    let motion = match read(path, animation, None, EulerOrder::Zxy)? {
+        Input::Bvh(clip) => Motion::from_bvh(&clip),
+        Input::Gltf { chosen: Some((_, motion)), .. } => motion,
+        Input::Gltf { .. } => anyhow::bail!("{} has no animation to read", path.display()),
+    };
+    if motion.frames() == 0 {
+        anyhow::bail!("{} has no frames of motion", path.display());
+    }
+    Ok(motion)
+}

@@ -9,6 +9,7 @@ mod generate;
 mod ingest;
 mod input;
 mod inspect;
+mod search;
 mod tokens;
 mod train;
 
@@ -49,6 +50,8 @@ enum Command {
     Generate(generate::GenerateArgs),
     /// Edit a clip by prompt: inpaint a span, continue it, or chain prompts.
     Edit(generate::EditArgs),
+    /// Search the motion library by text, by example clip and by filters.
+    Search(search::Args),
 }
 
 impl Cli {
@@ -67,6 +70,7 @@ impl Cli {
             Command::Transfer(args) => tokens::run_transfer(args),
             Command::Generate(args) => generate::run_generate(args),
             Command::Edit(args) => generate::run_edit(args),
+            Command::Search(args) => search::run(args),
         }
     }
 }

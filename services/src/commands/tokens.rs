@@ -2,7 +2,7 @@
 //! the source skeleton or any other, with the shipped checkpoints.
 
 use super::context::StoreArgs;
-use super::input::{self, Input};
+use super::input;
 use anyhow::{Context, Result, anyhow, bail};
 use anymo_services::models::codecs::Graphs;
 use anymo_services::models::data::MODEL_FPS;
@@ -10,7 +10,6 @@ use anymo_services::models::shipped;
 use anymo_tokenizer::bvh;
 use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::prep::clean::{CleanClip, CleanOptions, clean};
-use anymo_tokenizer::skeleton::EulerOrder;
 use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
 use anymo_tokenizer::text::CachedEncoder;
@@ -98,14 +97,7 @@ fn load(args: &ModelArgs) -> Result<Loaded> {
 
 /// A user's clip: the motion as read and its cleaned form at the models' frame rate.
 fn read_clip(path: &Path, animation: Option<&str>) -> Result<(Motion, CleanClip)> {
-    let motion = match input::read(path, animation, Some(MODEL_FPS), EulerOrder::Zxy)? {
-        Input::Bvh(clip) => Motion::from_bvh(&clip),
-        Input::Gltf { chosen: Some((_, motion)), .. } => motion,
-        Input::Gltf { .. } => bail!("{} has no animation to read", path.display()),
-    };
-    if motion.frames() == 0 {
-        bail!("{} has no frames of motion", path.display());
-    }
+    let motion = input::read_motion(path, animation)?;
     let cleaned =
         clean(&motion, &CleanOptions::default()).map_err(|r| anyhow!("{} cannot be used: {r}", path.display()))?;
     let resampled = CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned };
