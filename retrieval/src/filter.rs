@@ -163,6 +163,11 @@ impl Allowed {
         Allowed(Some(Arc::new(words)))
     }
 
+    /// Whether every id is allowed.
+    pub fn is_all(&self) -> bool {
+        self.0.is_none()
+    }
+
     /// Whether `id` is allowed.
     pub fn contains(&self, id: u64) -> bool {
         match &self.0 {

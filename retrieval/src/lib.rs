@@ -8,6 +8,7 @@ pub mod filter;
 pub mod fusion;
 pub mod library;
 pub mod metrics;
+mod sketch;
 pub mod text;
 pub mod vector;
 

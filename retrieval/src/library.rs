@@ -24,6 +24,8 @@ pub const MAX_DEPTH: usize = 1000;
 /// Each retriever contributes at least this many candidates to the fusion, so a page's order
 /// does not depend on how deep it is.
 const MIN_CANDIDATES: usize = 100;
+/// From this many caption vectors on, their scan gets a thread of its own.
+const PARALLEL_SCAN_MIN: usize = 8192;
 
 /// Why the library failed.
 #[derive(Debug, thiserror::Error)]
@@ -292,9 +294,36 @@ impl Library {
         ids
     }
 
-    /// Adds clips (replacing those with the same ids), committed together.
+    /// Adds clips (replacing those with the same ids), committed together. On failure the
+    /// library is as it was (in memory; on disk the commit point decides).
     pub fn upsert(&mut self, entries: Vec<Entry>) -> Result<(), SearchError> {
-        for e in &entries {
+        let before: Vec<Option<Entry>> = entries.iter().map(|e| self.entry(e.document.id)).collect();
+        let result = self.try_upsert(&entries);
+        if result.is_err() {
+            for (e, old) in entries.iter().zip(before) {
+                let id = e.document.id;
+                let (caption, motion) = old.map_or((None, None), |o| (o.caption_vector, o.motion_vector));
+                for (index, vector) in [(&mut self.captions, caption), (&mut self.motions, motion)] {
+                    match vector {
+                        Some(v) => index.upsert(id, &v).expect("restoring a vector that fitted"),
+                        None => {
+                            index.remove(id);
+                        }
+                    }
+                }
+            }
+            return result;
+        }
+        for e in entries {
+            let document = e.document;
+            self.catalog.insert(document.id, Catalogued { key: FilterKey::of(&document), document });
+        }
+        Ok(())
+    }
+
+    /// Writes vectors (saved first) and documents (committed last).
+    fn try_upsert(&mut self, entries: &[Entry]) -> Result<(), SearchError> {
+        for e in entries {
             let id = e.document.id;
             for (index, vector) in [(&mut self.captions, &e.caption_vector), (&mut self.motions, &e.motion_vector)] {
                 match vector {
@@ -306,11 +335,8 @@ impl Library {
             }
         }
         self.save_vectors()?;
-        let documents: Vec<ClipDocument> = entries.into_iter().map(|e| e.document).collect();
+        let documents: Vec<ClipDocument> = entries.iter().map(|e| e.document.clone()).collect();
         self.text.write(&documents, &[])?;
-        for document in documents {
-            self.catalog.insert(document.id, Catalogued { key: FilterKey::of(&document), document });
-        }
         Ok(())
     }
 
@@ -361,18 +387,40 @@ impl Library {
             let filter = query.filter.compile();
             Allowed::only(self.catalog.values().filter(|c| filter.accepts(&c.key)).map(|c| c.document.id))
         };
-        let keep = |id: u64| allowed.contains(id) && self.catalog.contains_key(&id);
+        // Every vector belongs to a catalogued clip (pruned on open, rolled back on a failed
+        // upsert), so only the filter is consulted.
+        let keep = |id: u64| allowed.contains(id);
         let candidates = depth.max(MIN_CANDIDATES);
-        let vector_list = |index: &ExactIndex, v: &Option<Vec<f32>>| -> Result<Vec<u64>, SearchError> {
-            let v = v.as_deref().expect("checked above");
-            Ok(index.search(v, candidates, &keep)?.into_iter().map(|h| h.id).collect())
+        let vector_list = |index: &ExactIndex, v: &Option<Vec<f32>>, on: bool| -> Result<Vec<u64>, SearchError> {
+            match v {
+                Some(v) if on => Ok(index.search(v, candidates, &keep)?.into_iter().map(|h| h.id).collect()),
+                _ => Ok(Vec::new()),
+            }
         };
-        let bm25: Vec<u64> = match text {
-            Some(t) if use_bm25 => self.text.search(t, &allowed, candidates)?.into_iter().map(|h| h.0).collect(),
-            _ => Vec::new(),
+        let bm25_list = || -> Result<Vec<u64>, SearchError> {
+            match text {
+                Some(t) if use_bm25 => {
+                    Ok(self.text.search(t, &allowed, candidates)?.into_iter().map(|h| h.0).collect())
+                }
+                _ => Ok(Vec::new()),
+            }
         };
-        let captions = if use_captions { vector_list(&self.captions, &query.caption_vector)? } else { Vec::new() };
-        let motions = if use_motions { vector_list(&self.motions, &query.motion_vector)? } else { Vec::new() };
+        // A large library's caption scan runs beside the other two (the machine has two cores).
+        let (bm25, captions, motions) = if use_captions && self.captions.len() >= PARALLEL_SCAN_MIN {
+            std::thread::scope(|scope| {
+                let captions = scope.spawn(|| vector_list(&self.captions, &query.caption_vector, true));
+                let bm25 = bm25_list();
+                let motions = vector_list(&self.motions, &query.motion_vector, use_motions);
+                let captions = captions.join().expect("the caption scan panicked");
+                Ok::<_, SearchError>((bm25?, captions?, motions?))
+            })?
+        } else {
+            (
+                bm25_list()?,
+                vector_list(&self.captions, &query.caption_vector, use_captions)?,
+                vector_list(&self.motions, &query.motion_vector, use_motions)?,
+            )
+        };
         let everything = |_: u64| true;
         let has_caption = |id: u64| self.captions.contains(id);
         let has_motion = |id: u64| self.motions.contains(id);
@@ -477,6 +525,23 @@ mod tests {
         };
         assert_eq!(ids(&library.search(&only_motion).unwrap()), vec![3, 4]);
         assert!(library.search(&only_motion).unwrap().hits[0].snippet.is_none());
+    }
+
+    #[test]
+    fn a_failed_upsert_changes_nothing() {
+        let mut library = Library::in_memory(spaces("evaluator"));
+        library.upsert(corpus()).unwrap();
+        let mut replaced = entry(1, "horse", "a horse gallops", [0.0, 1.0], [0.0, 1.0]);
+        replaced.document.captions = vec!["a horse rears".into()];
+        let mut bad = entry(9, "cat", "a cat naps", [1.0, 0.0], [1.0, 0.0]);
+        bad.motion_vector = Some(vec![1.0, 0.0, 0.0]);
+        assert!(library.upsert(vec![replaced, bad]).is_err());
+        assert_eq!(library.ids(), vec![1, 2, 3, 4]);
+        let kept = library.entry(1).unwrap();
+        assert_eq!(kept.document, corpus()[0].document);
+        assert_eq!(kept.caption_vector, corpus()[0].caption_vector);
+        let motion = Query { motion_vector: Some(vec![1.0, 0.0]), limit: 1, ..Query::default() };
+        assert_eq!(ids(&library.search(&motion).unwrap()), vec![1]);
     }
 
     #[test]

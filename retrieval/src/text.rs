@@ -208,13 +208,18 @@ impl TextIndex {
         }
         let searcher = self.reader.searcher();
         let query = self.parse(text);
-        let allowed = allowed.clone();
-        let collector = FilterCollector::new(
-            "id".to_string(),
-            move |id: u64| allowed.contains(id),
-            TopDocs::with_limit(limit).order_by_score(),
-        );
-        let top = searcher.search(&*query, &collector)?;
+        let top_docs = TopDocs::with_limit(limit).order_by_score();
+        // Unfiltered, tantivy can skip blocks that cannot make the top (block-max WAND); a
+        // filter has to see every match.
+        let top = if allowed.is_all() {
+            searcher.search(&*query, &top_docs)?
+        } else {
+            let allowed = allowed.clone();
+            searcher.search(
+                &*query,
+                &FilterCollector::new("id".to_string(), move |id: u64| allowed.contains(id), top_docs),
+            )?
+        };
         let mut columns = Vec::new();
         for reader in searcher.segment_readers() {
             columns.push(reader.fast_fields().u64("id")?);

@@ -1,11 +1,15 @@
 //! Vectors by clip id with exact nearest-neighbour search. An exact scan over unit vectors is
 //! fast enough to about 100k clips (ARCHITECTURE.md); the trait leaves room for an approximate
-//! index later. The index persists in one little-endian file, written atomically.
+//! index later. The scan reads int8 codes with proven error bounds first and scores in f32 only
+//! the vectors that can still make the top k (`sketch`), so results equal a full f32 scan. The
+//! index persists in one little-endian file, written atomically.
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+use crate::sketch::Sketch;
 
 const MAGIC: &[u8; 8] = b"ANYMOVEC";
 const VERSION: u32 = 1;
@@ -79,6 +83,7 @@ pub struct ExactIndex {
     ids: Vec<u64>,
     vectors: Vec<f32>,
     slots: HashMap<u64, usize>,
+    sketch: Sketch,
 }
 
 /// An f32 ordered for the heap (scores are finite: vectors and queries are checked).
@@ -115,7 +120,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 impl ExactIndex {
     /// An empty index of `dim`-dimensional vectors.
     pub fn new(dim: usize) -> ExactIndex {
-        ExactIndex { dim, ids: Vec::new(), vectors: Vec::new(), slots: HashMap::new() }
+        ExactIndex { dim, ids: Vec::new(), vectors: Vec::new(), slots: HashMap::new(), sketch: Sketch::new(dim) }
     }
 
     /// Whether clip `id` has a vector.
@@ -193,7 +198,9 @@ impl ExactIndex {
         if slots.len() != ids.len() {
             return Err(corrupt("a clip id appears twice".into()));
         }
-        Ok(ExactIndex { dim, ids, vectors, slots })
+        let mut sketch = Sketch::new(dim);
+        vectors.chunks_exact(dim.max(1)).take(ids.len()).for_each(|v| sketch.push(v));
+        Ok(ExactIndex { dim, ids, vectors, slots, sketch })
     }
 }
 
@@ -209,11 +216,15 @@ impl VectorIndex for ExactIndex {
     fn upsert(&mut self, id: u64, vector: &[f32]) -> Result<(), IndexError> {
         self.check(id, vector)?;
         match self.slots.get(&id) {
-            Some(&slot) => self.vectors[slot * self.dim..(slot + 1) * self.dim].copy_from_slice(vector),
+            Some(&slot) => {
+                self.vectors[slot * self.dim..(slot + 1) * self.dim].copy_from_slice(vector);
+                self.sketch.set(slot, vector);
+            }
             None => {
                 self.slots.insert(id, self.ids.len());
                 self.ids.push(id);
                 self.vectors.extend_from_slice(vector);
+                self.sketch.push(vector);
             }
         }
         Ok(())
@@ -230,24 +241,52 @@ impl VectorIndex for ExactIndex {
         }
         self.ids.pop();
         self.vectors.truncate(last * self.dim);
+        self.sketch.swap_remove(slot);
         true
     }
 
     fn search(&self, query: &[f32], k: usize, keep: &dyn Fn(u64) -> bool) -> Result<Vec<Hit>, IndexError> {
         self.check(0, query)?;
+        if k == 0 {
+            return Ok(Vec::new());
+        }
+        // Pass 1: bounds from the codes. The k-th best lower bound so far is a score the true
+        // k-th best reaches, and it only rises, so a vector whose upper bound falls short of it
+        // cannot be in the top k.
+        let q = self.sketch.query(query);
+        let mut lows: BinaryHeap<Reverse<Ranked>> = BinaryHeap::with_capacity(k + 1);
+        let mut threshold = f32::NEG_INFINITY;
+        let mut bounds: Vec<(usize, f32)> = Vec::new();
+        for (slot, &id) in self.ids.iter().enumerate() {
+            if !keep(id) {
+                continue;
+            }
+            let (low, high) = self.sketch.bounds(slot, &q);
+            if high < threshold {
+                continue;
+            }
+            bounds.push((slot, high));
+            lows.push(Reverse(Ranked(low, Reverse(0))));
+            if lows.len() > k {
+                lows.pop();
+            }
+            if lows.len() == k {
+                threshold = lows.peek().map_or(threshold, |r| r.0.0);
+            }
+        }
+        // Pass 2: exact scores of the vectors that can still make it.
         let mut best: BinaryHeap<Reverse<Ranked>> = BinaryHeap::with_capacity(k + 1);
-        if k > 0 {
-            for (slot, &id) in self.ids.iter().enumerate() {
-                if !keep(id) {
-                    continue;
-                }
-                let ranked = Ranked(dot(query, &self.vectors[slot * self.dim..(slot + 1) * self.dim]), Reverse(id));
-                if best.len() < k {
-                    best.push(Reverse(ranked));
-                } else if best.peek().is_some_and(|worst| ranked > worst.0) {
-                    best.pop();
-                    best.push(Reverse(ranked));
-                }
+        for &(slot, high) in &bounds {
+            if high < threshold {
+                continue;
+            }
+            let score = dot(query, &self.vectors[slot * self.dim..(slot + 1) * self.dim]);
+            let ranked = Ranked(score, Reverse(self.ids[slot]));
+            if best.len() < k {
+                best.push(Reverse(ranked));
+            } else if best.peek().is_some_and(|worst| ranked > worst.0) {
+                best.pop();
+                best.push(Reverse(ranked));
             }
         }
         let mut hits: Vec<Ranked> = best.into_iter().map(|r| r.0).collect();
@@ -285,6 +324,34 @@ mod tests {
             }
             let got: Vec<u64> = index.search(&query, k, &|_| true).unwrap().iter().map(|h| h.id).collect();
             prop_assert_eq!(got, brute(&vectors, &query, k));
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn search_of_real_valued_vectors_equals_a_full_f32_scan(
+            vectors in proptest::collection::vec(proptest::collection::vec(-1.0f32..1.0, 24), 0..120),
+            query in proptest::collection::vec(-1.0f32..1.0, 24),
+            duplicates in 0usize..6,
+            k in 1usize..15,
+        ) {
+            // Near-duplicates (as in a library with re-exports) make the bounds overlap most.
+            let mut vectors: Vec<(u64, Vec<f32>)> =
+                vectors.into_iter().enumerate().map(|(i, v)| (i as u64, v)).collect();
+            for d in 0..duplicates.min(vectors.len()) {
+                let mut twin = vectors[d].1.clone();
+                twin[0] += 1e-6;
+                vectors.push((1000 + d as u64, twin));
+            }
+            let mut index = ExactIndex::new(24);
+            for (id, v) in &vectors {
+                index.upsert(*id, v).unwrap();
+            }
+            let mut all: Vec<(f32, u64)> = vectors.iter().map(|(id, v)| (dot(&query, v), *id)).collect();
+            all.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            let expected: Vec<u64> = all.into_iter().take(k).map(|x| x.1).collect();
+            let got: Vec<u64> = index.search(&query, k, &|_| true).unwrap().iter().map(|h| h.id).collect();
+            prop_assert_eq!(got, expected);
         }
     }
 

@@ -2,7 +2,8 @@
 //! own ids and paths, its vectors jittered so copies are not exact duplicates), then the time to
 //! build the index from scratch, to reopen it, and the latency of top-10 queries: hybrid, BM25
 //! only, vectors only, hybrid under a filter, and by example. The same-run reference is one
-//! plain pass of dot products over every vector (the floor for an exact scan), and the query
+//! plain pass of dot products over every vector in f32 (what an exact scan would read without
+//! the int8 codes), and the query
 //! embedding (sentence encoder + evaluator projection) is timed on its own.
 //!
 //! `cargo bench -p anymo-services --bench search` after `anymo ingest ../shared/data/manifest.tsv`
@@ -171,7 +172,10 @@ fn main() {
         ("hybrid, --subject dog", all(Weights::default(), dogs)),
         ("by example (motion vectors)", examples),
     ];
-    println!("{} clips, 1 thread, {RUNS} queries each, top 10:", library.len());
+    println!(
+        "{} clips, one query at a time (a large library scans captions on a second thread), {RUNS} queries each, top 10:",
+        library.len()
+    );
     for (name, queries) in rows {
         let (p50, p99) = time_queries(&library, &queries);
         println!("  {name:<28} p50 {p50:.2} ms  p99 {p99:.2} ms  ({:.2}x the reference scan)", p50 / reference);

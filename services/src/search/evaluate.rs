@@ -86,7 +86,7 @@ pub fn evaluate(models: &mut SearchModels, clips: &[&ModelClip], hybrid: Weights
     for (i, clip) in clips.iter().enumerate() {
         let captions = &clip.item.captions[..clip.item.captions.len() - 1];
         let refs: Vec<&str> = captions.iter().map(String::as_str).collect();
-        let embeddings = models.encoder().encode(&refs)?;
+        let embeddings = models.sentences(&refs)?;
         let skeleton = clip.motion.skeleton();
         entries.push(Entry {
             document: ClipDocument {

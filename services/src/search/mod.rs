@@ -33,6 +33,10 @@ pub struct SearchModels {
     tat: Tat,
     evaluator: Evaluator,
     spaces: Spaces,
+    /// One thread for the models' small tensors: spread over both cores, candle's kernels spend
+    /// more time handing work over than computing (2.8x slower wall time, measured on
+    /// `anymo eval retrieval --limit 30`).
+    pool: rayon::ThreadPool,
 }
 
 /// Unit length (a zero vector stays zero).
@@ -69,12 +73,14 @@ impl SearchModels {
             captions: Space { model: "all-MiniLM-L6-v2".into(), dim: anymo_tokenizer::text::EMBEDDING_DIM },
             motions: Space { model: format!("{evaluator}:{}", &blake3::hash(&bytes).to_hex()[..16]), dim: motion_dim },
         };
-        Ok(SearchModels { encoder, tat, evaluator: model, spaces })
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().context("starting the models' thread")?;
+        Ok(SearchModels { encoder, tat, evaluator: model, spaces, pool })
     }
 
-    /// The sentence encoder (with its cache).
-    pub fn encoder(&mut self) -> &mut CachedEncoder {
-        &mut self.encoder
+    /// Sentence embeddings of `texts`.
+    pub fn sentences(&mut self, texts: &[&str]) -> Result<Vec<Vec<f32>>> {
+        let Self { encoder, pool, .. } = self;
+        Ok(pool.install(|| encoder.encode(texts))?)
     }
 
     /// The spaces these models make vectors in.
@@ -85,9 +91,12 @@ impl SearchModels {
     /// A text's vectors: its sentence embedding (caption space) and the evaluator's projection of
     /// it (motion space).
     pub fn text_vectors(&mut self, text: &str) -> Result<(Vec<f32>, Vec<f32>)> {
-        let sentence = self.encoder.encode(&[text])?.remove(0);
-        let motion = self.evaluator.embed_sentence(&sentence)?;
-        Ok((unit(sentence), unit(motion)))
+        let Self { encoder, evaluator, pool, .. } = self;
+        pool.install(|| {
+            let sentence = encoder.encode(&[text])?.remove(0);
+            let motion = evaluator.embed_sentence(&sentence)?;
+            Ok((unit(sentence), unit(motion)))
+        })
     }
 
     /// A clip's motion embedding: cleaned and resampled as for the models, then
@@ -104,16 +113,19 @@ impl SearchModels {
         if motion.frames() < 2 {
             bail!("the clip is too short to search by (it needs at least two frames)");
         }
-        let graph = Graphs::new(&mut self.encoder).of(motion.skeleton())?;
-        let latent = encode_whole(&mut self.tat, &graph, motion)?.latent;
-        let config = self.evaluator.config();
-        let window = config.max_tokens * config.latent_dim;
-        let mut sum = vec![0f32; self.spaces.motions.dim];
-        for rows in latent.chunks(window) {
-            let e = self.evaluator.embed_one(rows)?;
-            sum.iter_mut().zip(&e).for_each(|(s, x)| *s += x * rows.len() as f32);
-        }
-        Ok(unit(sum))
+        let Self { encoder, tat, evaluator, spaces, pool } = self;
+        pool.install(|| {
+            let graph = Graphs::new(encoder).of(motion.skeleton())?;
+            let latent = encode_whole(tat, &graph, motion)?.latent;
+            let config = evaluator.config();
+            let window = config.max_tokens * config.latent_dim;
+            let mut sum = vec![0f32; spaces.motions.dim];
+            for rows in latent.chunks(window) {
+                let e = evaluator.embed_one(rows)?;
+                sum.iter_mut().zip(&e).for_each(|(s, x)| *s += x * rows.len() as f32);
+            }
+            Ok(unit(sum))
+        })
     }
 
     /// The library query for text and/or an example clip: BM25 and caption vectors from the
