@@ -24,8 +24,6 @@ pub const MAX_DEPTH: usize = 1000;
 /// Each retriever contributes at least this many candidates to the fusion, so a page's order
 /// does not depend on how deep it is.
 const MIN_CANDIDATES: usize = 100;
-/// From this many caption vectors on, their scan gets a thread of its own.
-const PARALLEL_SCAN_MIN: usize = 8192;
 
 /// Why the library failed.
 #[derive(Debug, thiserror::Error)]
@@ -405,22 +403,9 @@ impl Library {
                 _ => Ok(Vec::new()),
             }
         };
-        // A large library's caption scan runs beside the other two (the machine has two cores).
-        let (bm25, captions, motions) = if use_captions && self.captions.len() >= PARALLEL_SCAN_MIN {
-            std::thread::scope(|scope| {
-                let captions = scope.spawn(|| vector_list(&self.captions, &query.caption_vector, true));
-                let bm25 = bm25_list();
-                let motions = vector_list(&self.motions, &query.motion_vector, use_motions);
-                let captions = captions.join().expect("the caption scan panicked");
-                Ok::<_, SearchError>((bm25?, captions?, motions?))
-            })?
-        } else {
-            (
-                bm25_list()?,
-                vector_list(&self.captions, &query.caption_vector, use_captions)?,
-                vector_list(&self.motions, &query.motion_vector, use_motions)?,
-            )
-        };
+        let bm25 = bm25_list()?;
+        let captions = vector_list(&self.captions, &query.caption_vector, use_captions)?;
+        let motions = vector_list(&self.motions, &query.motion_vector, use_motions)?;
         let everything = |_: u64| true;
         let has_caption = |id: u64| self.captions.contains(id);
         let has_motion = |id: u64| self.motions.contains(id);

@@ -124,6 +124,15 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
+/// The usable clips of the test split (at most `limit` per split of the manifest).
+fn test_clips(manifest: &std::path::Path, limit: Option<usize>) -> Result<Vec<ModelClip>> {
+    let (clips, rejected) =
+        data::load_manifest(manifest, limit).with_context(|| format!("reading the manifest {}", manifest.display()))?;
+    let test: Vec<ModelClip> = clips.into_iter().filter(|c| c.split == Split::Test).collect();
+    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
+    Ok(test)
+}
+
 fn f(x: f64) -> String {
     format!("{x:.4}")
 }
@@ -267,14 +276,11 @@ fn transfer_table(
 
 fn generator(args: GeneratorArgs) -> Result<()> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let (clips, rejected) = data::load_manifest(&args.manifest, args.limit)
-        .with_context(|| format!("reading the manifest {}", args.manifest.display()))?;
-    let test: Vec<&ModelClip> = clips.iter().filter(|c| c.split == Split::Test).collect();
-    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
+    let clips = test_clips(&args.manifest, args.limit)?;
+    let test: Vec<&ModelClip> = clips.iter().collect();
     let mut encoder = CachedEncoder::new(args.store.encoder()?);
     let (evaluator, evaluator_card) = generation::load_evaluator(&args.dir, &args.evaluator)?;
-    let tokenizer = evaluator_card.config["tokenizer_checkpoint"].as_str().unwrap_or("tat").to_string();
-    let (mut tat, _) = shipped::load_tat(&args.dir, &tokenizer, &mut encoder)?;
+    let mut tat = shipped::load_tat_of(&args.dir, &evaluator_card, &mut encoder)?;
     let mut loaded = Vec::new();
     for name in &args.models {
         let (generator, card) = generation::load_generator(&args.dir, name)?;
@@ -322,10 +328,8 @@ fn generator(args: GeneratorArgs) -> Result<()> {
 
 fn retrieval(args: RetrievalArgs) -> Result<()> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let (clips, rejected) = data::load_manifest(&args.manifest, args.limit)
-        .with_context(|| format!("reading the manifest {}", args.manifest.display()))?;
-    let test: Vec<&ModelClip> = clips.iter().filter(|c| c.split == Split::Test).collect();
-    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
+    let clips = test_clips(&args.manifest, args.limit)?;
+    let test: Vec<&ModelClip> = clips.iter().collect();
     let mut models = SearchModels::load(&args.dir, &args.evaluator, args.store.encoder()?)?;
     let rows = search::evaluate::evaluate(&mut models, &test, args.weights.weights())?;
     let mut table = String::from(

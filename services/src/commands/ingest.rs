@@ -2,10 +2,9 @@
 //! the new clips into the search index.
 
 use super::context::{StoreArgs, runtime};
+use super::search::IndexArgs;
 use anyhow::{Context, Result};
 use anymo_services::ingest::{Progress, ingest, items_from_folder, items_from_manifest};
-use anymo_services::models::shipped;
-use anymo_services::search::{SearchModels, open_library, sync};
 use anymo_services::store::Store;
 use anymo_tokenizer::text::CachedEncoder;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -22,12 +21,8 @@ pub struct Args {
     /// Leave the search index as it is (the next `anymo search` brings it up to date).
     #[arg(long)]
     no_index: bool,
-    /// The evaluator checkpoint that embeds motions for search.
-    #[arg(long, default_value = "evaluator")]
-    evaluator: String,
-    /// The checkpoints' folder.
-    #[arg(long, default_value_os_t = shipped::default_dir())]
-    checkpoints: PathBuf,
+    #[command(flatten)]
+    index: IndexArgs,
     #[command(flatten)]
     store: StoreArgs,
 }
@@ -79,23 +74,18 @@ pub fn run(args: Args) -> Result<()> {
 
 /// Indexes the clips the search index lacks.
 fn update_index(args: &Args, runtime: &tokio::runtime::Runtime, store: &Store) -> Result<()> {
-    let mut models = SearchModels::load(&args.checkpoints, &args.evaluator, args.store.encoder()?)
-        .context("loading the search models (use --no-index to ingest without updating the search index)")?;
-    let mut library = open_library(&args.store.data_dir, &models)?;
-    let bar = ProgressBar::new(0);
-    bar.set_style(ProgressStyle::with_template("indexing {bar:40} {pos}/{len} clips eta {eta}").expect("a template"));
     let start = Instant::now();
-    let report = runtime.block_on(sync(store, &mut library, &mut models, &mut |done, todo| {
-        bar.set_length(todo as u64);
-        bar.set_position(done as u64);
-    }))?;
-    bar.finish_and_clear();
+    let synced = args
+        .index
+        .sync(&args.store, runtime, store)
+        .context("updating the search index (use --no-index to ingest without it)")?;
+    let report = &synced.report;
     println!(
         "search index: {} clips indexed, {} removed in {:.1} s; {} clips searchable",
         report.indexed,
         report.removed,
         start.elapsed().as_secs_f64(),
-        library.len()
+        synced.library.len()
     );
     for problem in &report.without_motion {
         println!("  {problem}");

@@ -4,11 +4,13 @@
 use super::context::{StoreArgs, runtime};
 use super::input;
 use anyhow::{Result, bail};
-use anymo_retrieval::{Filter, Found, Page, Weights};
+use anymo_retrieval::{Filter, Found, Library, Page, Weights};
 use anymo_services::models::shipped;
-use anymo_services::search::{SearchModels, open_library, sync};
+use anymo_services::search::{SearchModels, SyncReport, open_library, sync};
+use anymo_services::store::Store;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
+use tokio::runtime::Runtime;
 
 /// A search's filters.
 #[derive(clap::Args)]
@@ -89,14 +91,53 @@ pub struct Args {
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
-    /// The evaluator checkpoint that embeds motions.
+    #[command(flatten)]
+    index: IndexArgs,
+    #[command(flatten)]
+    store: StoreArgs,
+}
+
+/// The models behind the search index; shared with `anymo ingest`.
+#[derive(clap::Args)]
+pub struct IndexArgs {
+    /// The evaluator checkpoint that embeds motions for search.
     #[arg(long, default_value = "evaluator")]
     evaluator: String,
     /// The checkpoints' folder.
     #[arg(long, default_value_os_t = shipped::default_dir())]
     checkpoints: PathBuf,
-    #[command(flatten)]
-    store: StoreArgs,
+}
+
+/// The loaded search models and the data directory's index, brought up to date with the store.
+pub struct SyncedIndex {
+    /// The models.
+    pub models: SearchModels,
+    /// The index.
+    pub library: Library,
+    /// What the sync did.
+    pub report: SyncReport,
+}
+
+impl IndexArgs {
+    /// Loads the models, opens the index and syncs it with `store`, with a progress bar on
+    /// standard error while there is something to index.
+    pub fn sync(&self, store_args: &StoreArgs, runtime: &Runtime, store: &Store) -> Result<SyncedIndex> {
+        let mut models = SearchModels::load(&self.checkpoints, &self.evaluator, store_args.encoder()?)?;
+        let mut library = open_library(&store_args.data_dir, &models)?;
+        let bar = ProgressBar::hidden();
+        bar.set_style(
+            ProgressStyle::with_template("indexing {bar:40} {pos}/{len} clips eta {eta}").expect("a template"),
+        );
+        let report = runtime.block_on(sync(store, &mut library, &mut models, &mut |done, todo| {
+            if bar.is_hidden() {
+                bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                bar.set_length(todo as u64);
+            }
+            bar.set_position(done as u64);
+        }))?;
+        bar.finish_and_clear();
+        Ok(SyncedIndex { models, library, report })
+    }
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -104,20 +145,9 @@ pub fn run(args: Args) -> Result<()> {
         bail!("give words to search for, --like CLIP, or both");
     }
     let like = args.like.as_deref().map(|p| input::read_motion(p, args.animation.as_deref())).transpose()?;
-    let mut models = SearchModels::load(&args.checkpoints, &args.evaluator, args.store.encoder()?)?;
-    let mut library = open_library(&args.store.data_dir, &models)?;
     let runtime = runtime()?;
     let store = runtime.block_on(args.store.open())?;
-    let bar = ProgressBar::hidden();
-    bar.set_style(ProgressStyle::with_template("indexing {bar:40} {pos}/{len} clips eta {eta}").expect("a template"));
-    let report = runtime.block_on(sync(&store, &mut library, &mut models, &mut |done, todo| {
-        if bar.is_hidden() {
-            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-            bar.set_length(todo as u64);
-        }
-        bar.set_position(done as u64);
-    }))?;
-    bar.finish_and_clear();
+    let SyncedIndex { mut models, library, report } = args.index.sync(&args.store, &runtime, &store)?;
     if report.indexed + report.removed > 0 {
         eprintln!("index updated: {} clips indexed, {} removed", report.indexed, report.removed);
     }

@@ -57,3 +57,9 @@ pub fn load_tat(dir: &Path, name: &str, encoder: &mut CachedEncoder) -> Result<(
     tat.restore_buffers(&rest)?;
     Ok((tat, card))
 }
+
+/// Loads the TAT a generator or evaluator was trained on, as its model card names it.
+pub fn load_tat_of(dir: &Path, card: &ModelCard, encoder: &mut CachedEncoder) -> Result<Tat> {
+    let tokenizer = card.config["tokenizer_checkpoint"].as_str().unwrap_or("tat");
+    Ok(load_tat(dir, tokenizer, encoder)?.0)
+}

@@ -47,9 +47,8 @@ impl Studio {
     /// Loads generator `model` from `checkpoints` with the tokenizer it was trained on.
     pub fn load(checkpoints: &Path, model: &str, encoder: SentenceEncoder) -> Result<Studio> {
         let (generator, card) = generation::load_generator(checkpoints, model)?;
-        let tokenizer = card.config["tokenizer_checkpoint"].as_str().unwrap_or("tat").to_string();
         let mut encoder = CachedEncoder::new(encoder);
-        let (tat, _) = shipped::load_tat(checkpoints, &tokenizer, &mut encoder)?;
+        let tat = shipped::load_tat_of(checkpoints, &card, &mut encoder)?;
         Ok(Studio { tat, generator, encoder })
     }
 

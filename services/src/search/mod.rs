@@ -33,10 +33,6 @@ pub struct SearchModels {
     tat: Tat,
     evaluator: Evaluator,
     spaces: Spaces,
-    /// One thread for the models' small tensors: spread over both cores, candle's kernels spend
-    /// more time handing work over than computing (2.8x slower wall time, measured on
-    /// `anymo eval retrieval --limit 30`).
-    pool: rayon::ThreadPool,
 }
 
 /// Unit length (a zero vector stays zero).
@@ -63,9 +59,8 @@ impl SearchModels {
     /// Loads evaluator `evaluator` from `checkpoints`, with the tokenizer it reads.
     pub fn load(checkpoints: &Path, evaluator: &str, encoder: SentenceEncoder) -> Result<SearchModels> {
         let (model, card) = generation::load_evaluator(checkpoints, evaluator)?;
-        let tokenizer = card.config["tokenizer_checkpoint"].as_str().unwrap_or("tat").to_string();
         let mut encoder = CachedEncoder::new(encoder);
-        let (tat, _) = shipped::load_tat(checkpoints, &tokenizer, &mut encoder)?;
+        let tat = shipped::load_tat_of(checkpoints, &card, &mut encoder)?;
         let weights = shipped::files(checkpoints, evaluator).0;
         let bytes = std::fs::read(&weights).with_context(|| format!("reading {}", weights.display()))?;
         let motion_dim = model.embed_sentence(&[0.0; anymo_tokenizer::text::EMBEDDING_DIM])?.len();
@@ -73,14 +68,12 @@ impl SearchModels {
             captions: Space { model: "all-MiniLM-L6-v2".into(), dim: anymo_tokenizer::text::EMBEDDING_DIM },
             motions: Space { model: format!("{evaluator}:{}", &blake3::hash(&bytes).to_hex()[..16]), dim: motion_dim },
         };
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().context("starting the models' thread")?;
-        Ok(SearchModels { encoder, tat, evaluator: model, spaces, pool })
+        Ok(SearchModels { encoder, tat, evaluator: model, spaces })
     }
 
     /// Sentence embeddings of `texts`.
     pub fn sentences(&mut self, texts: &[&str]) -> Result<Vec<Vec<f32>>> {
-        let Self { encoder, pool, .. } = self;
-        Ok(pool.install(|| encoder.encode(texts))?)
+        Ok(self.encoder.encode(texts)?)
     }
 
     /// The spaces these models make vectors in.
@@ -91,12 +84,9 @@ impl SearchModels {
     /// A text's vectors: its sentence embedding (caption space) and the evaluator's projection of
     /// it (motion space).
     pub fn text_vectors(&mut self, text: &str) -> Result<(Vec<f32>, Vec<f32>)> {
-        let Self { encoder, evaluator, pool, .. } = self;
-        pool.install(|| {
-            let sentence = encoder.encode(&[text])?.remove(0);
-            let motion = evaluator.embed_sentence(&sentence)?;
-            Ok((unit(sentence), unit(motion)))
-        })
+        let sentence = self.encoder.encode(&[text])?.remove(0);
+        let motion = self.evaluator.embed_sentence(&sentence)?;
+        Ok((unit(sentence), unit(motion)))
     }
 
     /// A clip's motion embedding: cleaned and resampled as for the models, then
@@ -113,19 +103,16 @@ impl SearchModels {
         if motion.frames() < 2 {
             bail!("the clip is too short to search by (it needs at least two frames)");
         }
-        let Self { encoder, tat, evaluator, spaces, pool } = self;
-        pool.install(|| {
-            let graph = Graphs::new(encoder).of(motion.skeleton())?;
-            let latent = encode_whole(tat, &graph, motion)?.latent;
-            let config = evaluator.config();
-            let window = config.max_tokens * config.latent_dim;
-            let mut sum = vec![0f32; spaces.motions.dim];
-            for rows in latent.chunks(window) {
-                let e = evaluator.embed_one(rows)?;
-                sum.iter_mut().zip(&e).for_each(|(s, x)| *s += x * rows.len() as f32);
-            }
-            Ok(unit(sum))
-        })
+        let graph = Graphs::new(&mut self.encoder).of(motion.skeleton())?;
+        let latent = encode_whole(&mut self.tat, &graph, motion)?.latent;
+        let config = self.evaluator.config();
+        let window = config.max_tokens * config.latent_dim;
+        let mut sum = vec![0f32; self.spaces.motions.dim];
+        for rows in latent.chunks(window) {
+            let e = self.evaluator.embed_one(rows)?;
+            sum.iter_mut().zip(&e).for_each(|(s, x)| *s += x * rows.len() as f32);
+        }
+        Ok(unit(sum))
     }
 
     /// The library query for text and/or an example clip: BM25 and caption vectors from the
