@@ -395,15 +395,10 @@ impl Library {
                 _ => Ok(Vec::new()),
             }
         };
-        let bm25_list = || -> Result<Vec<u64>, SearchError> {
-            match text {
-                Some(t) if use_bm25 => {
-                    Ok(self.text.search(t, &allowed, candidates)?.into_iter().map(|h| h.0).collect())
-                }
-                _ => Ok(Vec::new()),
-            }
+        let bm25: Vec<u64> = match text {
+            Some(t) if use_bm25 => self.text.search(t, &allowed, candidates)?.into_iter().map(|h| h.0).collect(),
+            _ => Vec::new(),
         };
-        let bm25 = bm25_list()?;
         let captions = vector_list(&self.captions, &query.caption_vector, use_captions)?;
         let motions = vector_list(&self.motions, &query.motion_vector, use_motions)?;
         let everything = |_: u64| true;
