@@ -128,10 +128,10 @@ impl IndexArgs {
         bar.set_style(
             ProgressStyle::with_template("indexing {bar:40} {pos}/{len} clips eta {eta}").expect("a template"),
         );
-        let report = runtime.block_on(sync(store, &mut library, &mut models, &mut |done, todo| {
+        let report = runtime.block_on(sync(store, &mut library, &mut models, &mut |done, pending| {
             if bar.is_hidden() {
                 bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-                bar.set_length(todo as u64);
+                bar.set_length(pending as u64);
             }
             bar.set_position(done as u64);
         }))?;
@@ -171,7 +171,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// A page as JSON: each hit's clip, the matched caption with its highlight ranges, and ranks.
-pub fn page_json(page: &Page, offset: usize) -> serde_json::Value {
+fn page_json(page: &Page, offset: usize) -> serde_json::Value {
     let hits: Vec<serde_json::Value> = page
         .hits
         .iter()

@@ -193,7 +193,7 @@ pub struct SyncReport {
 
 /// Brings `library` up to date with `store`: indexes stored clips it lacks or holds without
 /// their vectors, and removes clips the store no longer has. Commits every [`BATCH`] clips, so
-/// an interrupted sync keeps what it did. `progress(done, todo)` is called after each batch.
+/// an interrupted sync keeps what it did. `progress(done, pending)` is called after each batch.
 pub async fn sync(
     store: &Store,
     library: &mut Library,
@@ -205,11 +205,11 @@ pub async fn sync(
     let gone: Vec<u64> = library.ids().into_iter().filter(|id| !stored_set.contains(id)).collect();
     library.remove(&gone)?;
     let incomplete: std::collections::HashSet<u64> = library.incomplete().into_iter().collect();
-    let todo: Vec<i64> =
+    let pending: Vec<i64> =
         stored.into_iter().filter(|&id| !library.contains(id as u64) || incomplete.contains(&(id as u64))).collect();
-    let mut report = SyncReport { indexed: todo.len(), removed: gone.len(), without_motion: Vec::new() };
+    let mut report = SyncReport { indexed: pending.len(), removed: gone.len(), without_motion: Vec::new() };
     let mut done = 0;
-    for batch in todo.chunks(BATCH) {
+    for batch in pending.chunks(BATCH) {
         let mut entries = Vec::with_capacity(batch.len());
         for &id in batch {
             let (Some(record), Some(bvh)) = (store.index_record(id).await?, store.clip_bvh(id).await?) else {
@@ -221,7 +221,7 @@ pub async fn sync(
         }
         library.upsert(entries)?;
         done += batch.len();
-        progress(done, todo.len());
+        progress(done, pending.len());
     }
     Ok(report)
 }
