@@ -50,6 +50,27 @@ pub fn files_with_suffix(dir: &Path, suffix: &str) -> Vec<PathBuf> {
     out
 }
 
+/// A manifest of the real manifest's lines whose path passes `keep`, written in `dir` with the
+/// clips linked beside it, so a test can ingest a small library.
+pub fn manifest(shared: &Path, dir: &Path, keep: &dyn Fn(&str) -> bool) -> PathBuf {
+    let text = std::fs::read_to_string(shared.join("manifest.tsv")).expect("the manifest is readable");
+    let mut lines = text.lines();
+    let mut out = format!("{}\n", lines.next().expect("a header"));
+    for line in lines.filter(|l| keep(l.split('\t').next().unwrap_or_default())) {
+        let path = line.split('\t').next().unwrap_or_default();
+        let link = dir.join(path);
+        if !link.exists() {
+            std::fs::create_dir_all(link.parent().expect("a folder")).expect("a scratch folder");
+            std::os::unix::fs::symlink(shared.join(path), &link).expect("a link to the clip");
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    let file = dir.join(format!("manifest-{}.tsv", out.lines().count()));
+    std::fs::write(&file, out).expect("a writable scratch folder");
+    file
+}
+
 /// A scratch directory unique to one test, emptied first.
 pub fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("anymo-tests-{}-{name}", std::process::id()));

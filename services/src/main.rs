@@ -1,4 +1,4 @@
-//! The `anymo` command line: inspect, convert and pose motion files.
+//! The `anymo` command line: motion files, the corpus, the models, search and the server.
 
 mod commands;
 

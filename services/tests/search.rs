@@ -3,7 +3,7 @@
 //! then text, filters, example clips, pages and refusals are checked against concrete expected
 //! hits; a second ingest adds clips to the index in place; the retrieval eval runs on a sample.
 
-use anymo_tests::{data_dir, models_dir, scratch_dir, succeeded};
+use anymo_tests::{data_dir, manifest, models_dir, scratch_dir, succeeded};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Output};
@@ -29,27 +29,6 @@ fn search(data: &Path, models: &Path, args: &[&str]) -> Vec<Value> {
 
 fn paths(hits: &[Value]) -> Vec<String> {
     hits.iter().map(|h| h["path"].as_str().unwrap().rsplit('/').next().unwrap().to_string()).collect()
-}
-
-/// A manifest of the real manifest's lines whose path passes `keep`, with the clips linked
-/// beside it.
-fn manifest(shared: &Path, dir: &Path, keep: &dyn Fn(&str) -> bool) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(shared.join("manifest.tsv")).unwrap();
-    let mut lines = text.lines();
-    let mut out = format!("{}\n", lines.next().unwrap());
-    for line in lines.filter(|l| keep(l.split('\t').next().unwrap())) {
-        let path = line.split('\t').next().unwrap();
-        let link = dir.join(path);
-        if !link.exists() {
-            std::fs::create_dir_all(link.parent().unwrap()).unwrap();
-            std::os::unix::fs::symlink(shared.join(path), &link).unwrap();
-        }
-        out.push_str(line);
-        out.push('\n');
-    }
-    let file = dir.join(format!("manifest-{}.tsv", out.lines().count()));
-    std::fs::write(&file, out).unwrap();
-    file
 }
 
 #[test]

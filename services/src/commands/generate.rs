@@ -2,16 +2,14 @@
 //! of a clip (inpainting a span, continuing it, chaining prompts), with the shipped checkpoints.
 
 use super::context::StoreArgs;
-use super::tokens::write_bvh;
+use super::tokens::{read_skeleton, write_bvh};
 use anyhow::{Context, Result, bail};
 use anymo_generator::Request;
 use anymo_generator::sampling::Sampling;
 use anymo_services::models::data::MODEL_FPS;
 use anymo_services::models::shipped;
 use anymo_services::models::studio::Studio;
-use anymo_tokenizer::bvh;
 use anymo_tokenizer::motion::Motion;
-use anymo_tokenizer::skeleton::Skeleton;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
@@ -148,12 +146,6 @@ fn load(args: &GenerationArgs) -> Result<(Studio, Request)> {
     Ok((studio, Request { steps: None, samples: args.samples, sampling: args.sampling.sampling(), seed: args.seed }))
 }
 
-fn read_skeleton(path: &Path) -> Result<Skeleton> {
-    let clip =
-        bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
-    Ok(clip.skeleton().clone())
-}
-
 fn write_all(motions: Vec<Motion>, output: &Path) -> Result<()> {
     for (k, motion) in motions.iter().enumerate() {
         write_bvh(motion, &sample_path(output, k))?;
@@ -175,62 +167,30 @@ pub fn run_generate(args: GenerateArgs) -> Result<()> {
     let (mut studio, request) = load(&args.generation)?;
     let target = studio.target(&read_skeleton(&args.skeleton)?)?;
     let seconds = args.seconds.or(args.frames.map(|f| f as f64 / MODEL_FPS));
-    let steps = match seconds {
-        Some(s) => studio.steps(s)?,
-        None => {
-            let text = studio.text(&args.prompt)?;
-            studio.generator.predict_steps(&text, &target.embedding)?
-        }
-    };
-    let frames = seconds.map(|s| (s * MODEL_FPS).round() as usize);
-    let samples = studio.generate(&args.prompt, &target, &Request { steps: Some(steps), ..request })?;
-    write_all(studio.render(samples, [0.0; 3], frames, &target)?, &args.output)
+    write_all(studio.generate_motion(&args.prompt, &target, seconds, &request)?, &args.output)
 }
 
 pub fn run_edit(args: EditArgs) -> Result<()> {
     match args.edit {
         Edit::Inpaint { input, prompt, from, to, output, generation } => {
-            if !(from >= 0.0 && to > from) {
-                bail!("the span must satisfy 0 <= --from < --to; got {from}..{to}");
-            }
             let (mut studio, request) = load(&generation)?;
-            let (target, codes, start) = studio.clip(&super::input::read_motion(&input, None)?)?;
-            let per = studio.frames_per_token() as f64 / MODEL_FPS;
-            let duration = target.cleaned.motion.frames() as f64 / MODEL_FPS;
-            if from >= duration {
-                bail!("the span starts at {from} s but {} lasts {duration:.2} s", input.display());
-            }
-            let keep: Vec<bool> =
-                (0..codes.len()).map(|t| !((t as f64 + 1.0) * per > from && (t as f64) * per < to)).collect();
-            let text = studio.text(&prompt)?;
-            let samples = studio.generator.inpaint(&text, &target.embedding, &codes, &keep, &request)?;
-            let frames = target.cleaned.motion.frames();
-            write_all(studio.render(samples, start, Some(frames), &target)?, &output)
+            let clip = super::input::read_motion(&input, None)?;
+            let motions =
+                studio.inpaint(&clip, &prompt, (from, to), &request).with_context(|| input.display().to_string())?;
+            write_all(motions, &output)
         }
         Edit::Continue { input, prompt, seconds, output, generation } => {
             let (mut studio, request) = load(&generation)?;
-            let extra = studio.steps(seconds)?;
-            let (target, codes, start) = studio.clip(&super::input::read_motion(&input, None)?)?;
-            let text = studio.text(&prompt)?;
-            let samples = studio.generator.extend(&text, &target.embedding, &codes, extra, &request)?;
-            let frames = target.cleaned.motion.frames() + (seconds * MODEL_FPS).round() as usize;
-            write_all(studio.render(samples, start, Some(frames), &target)?, &output)
+            let clip = super::input::read_motion(&input, None)?;
+            write_all(studio.extend(&clip, &prompt, seconds, &request)?, &output)
         }
         Edit::Chain { skeleton, prompts, seconds, output, generation } => {
             if prompts.len() != seconds.len() {
                 bail!("give one --seconds per --prompt ({} prompts, {} durations)", prompts.len(), seconds.len());
             }
             let (mut studio, request) = load(&generation)?;
-            studio.steps(seconds.iter().sum()).context("the chain as a whole")?;
-            let target = studio.target(&read_skeleton(&skeleton)?)?;
-            let mut parts = Vec::new();
-            for (prompt, &s) in prompts.iter().zip(&seconds) {
-                parts.push((studio.text(prompt)?, studio.steps(s)?));
-            }
-            let refs: Vec<(&[f32], usize)> = parts.iter().map(|(t, s)| (t.as_slice(), *s)).collect();
-            let samples = studio.generator.chain(&refs, &target.embedding, &request)?;
-            let frames = seconds.iter().map(|s| (s * MODEL_FPS).round() as usize).sum();
-            write_all(studio.render(samples, [0.0; 3], Some(frames), &target)?, &output)
+            let parts: Vec<(String, f64)> = prompts.into_iter().zip(seconds).collect();
+            write_all(studio.chain(&read_skeleton(&skeleton)?, &parts, &request)?, &output)
         }
     }
 }

@@ -10,6 +10,7 @@ mod ingest;
 mod input;
 mod inspect;
 mod search;
+mod serve;
 mod tokens;
 mod train;
 
@@ -52,6 +53,8 @@ enum Command {
     Edit(generate::EditArgs),
     /// Search the motion library by text, by example clip and by filters.
     Search(search::Args),
+    /// Serve the REST and gRPC API (generation, editing, transfer, tokens, search, corpus).
+    Serve(serve::Args),
 }
 
 impl Cli {
@@ -71,6 +74,7 @@ impl Cli {
             Command::Generate(args) => generate::run_generate(args),
             Command::Edit(args) => generate::run_edit(args),
             Command::Search(args) => search::run(args),
+            Command::Serve(args) => serve::run(args),
         }
     }
 }

@@ -9,4 +9,5 @@ pub mod generation;
 pub mod generation_eval;
 pub mod shipped;
 pub mod studio;
+pub mod tokens;
 pub mod train;

@@ -5,9 +5,9 @@
 use super::codecs::Graphs;
 use super::data::MODEL_FPS;
 use super::{generation, shipped};
-use anyhow::{Result, anyhow, bail};
+use anyhow::Result;
 use anymo_generator::generate::Codes;
-use anymo_generator::{Generator, Request};
+use anymo_generator::{GenerationError, Generator, Request};
 use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::owo::SkeletonGraph;
 use anymo_tokenizer::prep::clean::{CleanClip, CleanOptions, clean};
@@ -19,6 +19,23 @@ use std::path::Path;
 
 /// Longest motion one request may ask for, in seconds.
 pub const MAX_SECONDS: f64 = 30.0;
+
+/// A request the models cannot serve because of what was asked (an empty prompt, a duration
+/// out of range, a skeleton that cannot be animated), as opposed to a failure of the models:
+/// servers answer it as the client's error.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Refusal(pub String);
+
+/// A refusal as an error.
+fn refuse(message: impl Into<String>) -> anyhow::Error {
+    Refusal(message.into()).into()
+}
+
+/// The frames `seconds` of motion take at the models' frame rate.
+pub fn frames_of(seconds: f64) -> usize {
+    (seconds * MODEL_FPS).round() as usize
+}
 
 /// A skeleton ready to be animated: the user's rest pose, its cleaned form, its graph and
 /// OwO's embedding of it.
@@ -60,15 +77,17 @@ impl Studio {
     /// Token steps covering `seconds`, refused outside `(0, MAX_SECONDS]`.
     pub fn steps(&self, seconds: f64) -> Result<usize> {
         if !(seconds > 0.0 && seconds <= MAX_SECONDS) {
-            bail!("a duration must be more than 0 and at most {MAX_SECONDS} seconds; {seconds} was asked");
+            return Err(refuse(format!(
+                "a duration must be more than 0 and at most {MAX_SECONDS} seconds; {seconds} was asked"
+            )));
         }
-        Ok(((seconds * MODEL_FPS).round() as usize).div_ceil(self.frames_per_token()).max(1))
+        Ok(frames_of(seconds).div_ceil(self.frames_per_token()).max(1))
     }
 
     /// The sentence embedding of a prompt.
     pub fn text(&mut self, prompt: &str) -> Result<Vec<f32>> {
         if prompt.trim().is_empty() {
-            bail!("the prompt is empty");
+            return Err(refuse("the prompt is empty"));
         }
         Ok(self.encoder.encode(&[prompt])?.remove(0))
     }
@@ -76,17 +95,18 @@ impl Studio {
     /// A skeleton to animate, from any skeleton (its rest pose is its offsets).
     pub fn target(&mut self, skeleton: &Skeleton) -> Result<Target> {
         let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
-        let cleaned =
-            clean(&rest, &CleanOptions::default()).map_err(|r| anyhow!("the skeleton cannot be animated: {r}"))?;
+        let cleaned = clean(&rest, &CleanOptions::default())
+            .map_err(|r| refuse(format!("the skeleton cannot be animated: {r}")))?;
         self.prepare(rest, cleaned)
     }
 
     /// A user's clip to edit, with its codes and where it starts.
     pub fn clip(&mut self, motion: &Motion) -> Result<(Target, Codes, [f32; 3])> {
         if motion.frames() == 0 {
-            bail!("the clip has no frames of motion");
+            return Err(refuse("the clip has no frames of motion"));
         }
-        let cleaned = clean(motion, &CleanOptions::default()).map_err(|r| anyhow!("the clip cannot be used: {r}"))?;
+        let cleaned =
+            clean(motion, &CleanOptions::default()).map_err(|r| refuse(format!("the clip cannot be used: {r}")))?;
         let cleaned = CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned };
         let target = self.prepare(motion.clone(), cleaned)?;
         let encoded = encode_whole(&mut self.tat, &target.graph, &target.cleaned.motion)?;
@@ -103,7 +123,71 @@ impl Studio {
     /// New motion for a prompt on a target: `request.samples` code sequences.
     pub fn generate(&mut self, prompt: &str, target: &Target, request: &Request) -> Result<Vec<Codes>> {
         let text = self.text(prompt)?;
-        Ok(self.generator.generate(&text, &target.embedding, request)?)
+        Ok(self.generator.generate(&text, &target.embedding, request).map_err(refusal_of)?)
+    }
+
+    /// New motion for a prompt on a target, rendered: `seconds` long, or as long as the length
+    /// predictor says for the prompt.
+    pub fn generate_motion(
+        &mut self,
+        prompt: &str,
+        target: &Target,
+        seconds: Option<f64>,
+        request: &Request,
+    ) -> Result<Vec<Motion>> {
+        let steps = match seconds {
+            Some(s) => self.steps(s)?,
+            None => {
+                let text = self.text(prompt)?;
+                self.generator.predict_steps(&text, &target.embedding)?
+            }
+        };
+        let samples = self.generate(prompt, target, &Request { steps: Some(steps), ..request.clone() })?;
+        self.render(samples, [0.0; 3], seconds.map(frames_of), target)
+    }
+
+    /// A clip with the span `from..to` seconds regenerated from a prompt and the rest kept.
+    pub fn inpaint(&mut self, clip: &Motion, prompt: &str, span: (f64, f64), request: &Request) -> Result<Vec<Motion>> {
+        let (from, to) = span;
+        if !(from >= 0.0 && to > from) {
+            return Err(refuse(format!("the span must satisfy 0 <= from < to; got {from}..{to}")));
+        }
+        let (target, codes, start) = self.clip(clip)?;
+        let per = self.frames_per_token() as f64 / MODEL_FPS;
+        let duration = target.cleaned.motion.frames() as f64 / MODEL_FPS;
+        if from >= duration {
+            return Err(refuse(format!("the span starts at {from} s but the clip lasts {duration:.2} s")));
+        }
+        let keep: Vec<bool> =
+            (0..codes.len()).map(|t| !((t as f64 + 1.0) * per > from && (t as f64) * per < to)).collect();
+        let text = self.text(prompt)?;
+        let samples = self.generator.inpaint(&text, &target.embedding, &codes, &keep, request).map_err(refusal_of)?;
+        let frames = target.cleaned.motion.frames();
+        self.render(samples, start, Some(frames), &target)
+    }
+
+    /// A clip followed by `seconds` of new motion from a prompt.
+    pub fn extend(&mut self, clip: &Motion, prompt: &str, seconds: f64, request: &Request) -> Result<Vec<Motion>> {
+        let extra = self.steps(seconds)?;
+        let (target, codes, start) = self.clip(clip)?;
+        let text = self.text(prompt)?;
+        let samples = self.generator.extend(&text, &target.embedding, &codes, extra, request).map_err(refusal_of)?;
+        let frames = target.cleaned.motion.frames() + frames_of(seconds);
+        self.render(samples, start, Some(frames), &target)
+    }
+
+    /// Prompts one after another on a skeleton, each `(prompt, seconds)` flowing into the next.
+    pub fn chain(&mut self, skeleton: &Skeleton, parts: &[(String, f64)], request: &Request) -> Result<Vec<Motion>> {
+        self.steps(parts.iter().map(|p| p.1).sum()).map_err(|e| refuse(format!("the chain as a whole: {e}")))?;
+        let target = self.target(skeleton)?;
+        let mut conditions = Vec::with_capacity(parts.len());
+        for (prompt, seconds) in parts {
+            conditions.push((self.text(prompt)?, self.steps(*seconds)?));
+        }
+        let refs: Vec<(&[f32], usize)> = conditions.iter().map(|(t, s)| (t.as_slice(), *s)).collect();
+        let samples = self.generator.chain(&refs, &target.embedding, request).map_err(refusal_of)?;
+        let frames = parts.iter().map(|p| frames_of(p.1)).sum();
+        self.render(samples, [0.0; 3], Some(frames), &target)
     }
 
     /// Decodes samples onto the target, cut to `frames` when given, back on the user's skeleton
@@ -126,5 +210,13 @@ impl Studio {
                 Ok(target.cleaned.restore(&decoded, &target.source))
             })
             .collect()
+    }
+}
+
+/// A generator error, as a refusal when the request caused it.
+fn refusal_of(error: GenerationError) -> anyhow::Error {
+    match error {
+        GenerationError::Model(e) => e.into(),
+        refused => refuse(refused.to_string()),
     }
 }

@@ -7,9 +7,10 @@ pub mod evaluate;
 
 use crate::models::codecs::Graphs;
 use crate::models::data::MODEL_FPS;
+use crate::models::studio::Refusal;
 use crate::models::{generation, shipped};
 use crate::store::{IndexRecord, Store};
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result};
 use anymo_generator::Evaluator;
 use anymo_retrieval::{ClipDocument, Entry, Filter, Library, Query, Space, Spaces, Weights};
 use anymo_tokenizer::motion::Motion;
@@ -92,7 +93,8 @@ impl SearchModels {
     /// A clip's motion embedding: cleaned and resampled as for the models, then
     /// [`SearchModels::embed_cleaned`].
     pub fn motion_vector(&mut self, motion: &Motion) -> Result<Vec<f32>> {
-        let cleaned = clean(motion, &CleanOptions::default()).map_err(|r| anyhow!("the clip cannot be used: {r}"))?;
+        let cleaned =
+            clean(motion, &CleanOptions::default()).map_err(|r| Refusal(format!("the clip cannot be used: {r}")))?;
         self.embed_cleaned(&cleaned.motion.resample(MODEL_FPS))
     }
 
@@ -101,7 +103,7 @@ impl SearchModels {
     /// `max_tokens` steps at once) and averaged, weighted by window length.
     pub fn embed_cleaned(&mut self, motion: &Motion) -> Result<Vec<f32>> {
         if motion.frames() < 2 {
-            bail!("the clip is too short to search by (it needs at least two frames)");
+            return Err(Refusal("the clip is too short to search by (it needs at least two frames)".into()).into());
         }
         let graph = Graphs::new(&mut self.encoder).of(motion.skeleton())?;
         let latent = encode_whole(&mut self.tat, &graph, motion)?.latent;

@@ -2,6 +2,10 @@
 //! SQLite file by default or PostgreSQL through `DATABASE_URL`, by one code path (sqlx's Any
 //! driver, `$n` placeholders, times as i64 milliseconds, embeddings as little-endian f32 blobs).
 
+mod server;
+
+pub use server::{Generation, Job, JobFile, JobStatus, NewGeneration};
+
 use sqlx::any::{AnyPoolOptions, AnyRow};
 use sqlx::{AnyPool, Row};
 use std::path::Path;
@@ -253,6 +257,17 @@ impl Store {
         Ok(())
     }
 
+    /// The clips a run did not store, with the reasons, in the order it met them.
+    pub async fn rejections(&self, run: i64) -> Result<Vec<(String, String)>, StoreError> {
+        sqlx::query("SELECT source_path, reason FROM ingest_rejections WHERE run_id = $1 ORDER BY id")
+            .bind(run)
+            .fetch_all(&self.pool)
+            .await?
+            .iter()
+            .map(|r| Ok((r.try_get(0)?, r.try_get(1)?)))
+            .collect()
+    }
+
     /// True when a clip with this content hash is stored.
     pub async fn has_clip(&self, content_hash: &str) -> Result<bool, StoreError> {
         let row = sqlx::query("SELECT COUNT(*) FROM clips WHERE content_hash = $1")
@@ -457,11 +472,61 @@ impl Store {
         else {
             return Ok(None);
         };
-        let gz: Vec<u8> = row.try_get(0)?;
-        let mut text = Vec::new();
-        std::io::Read::read_to_end(&mut flate2::read::MultiGzDecoder::new(gz.as_slice()), &mut text)
-            .map_err(|e| StoreError::Corrupt(format!("clip {id}: {e}")))?;
-        Ok(Some(text))
+        gunzip(&row.try_get::<Vec<u8>, _>(0)?).map(Some)
+    }
+
+    /// Up to `limit` clips with ids above `after`, ascending, with their captions.
+    pub async fn list_clips(&self, after: i64, limit: i64) -> Result<Vec<ClipRow>, StoreError> {
+        let rows = sqlx::query(
+            "SELECT id, source_path, skeleton_id, source, licence, subject, fps, frames, split, content_hash \
+             FROM clips WHERE id > $1 ORDER BY id LIMIT $2",
+        )
+        .bind(after)
+        .bind(limit)
+        .fetch_all(&self.pool)
+        .await?;
+        let mut out = Vec::with_capacity(rows.len());
+        for r in &rows {
+            let id: i64 = r.try_get(0)?;
+            let captions = sqlx::query("SELECT text FROM captions WHERE clip_id = $1 ORDER BY position")
+                .bind(id)
+                .fetch_all(&self.pool)
+                .await?
+                .iter()
+                .map(|c| c.try_get(0))
+                .collect::<Result<Vec<String>, _>>()?;
+            out.push(clip_row(r, captions)?);
+        }
+        Ok(out)
+    }
+
+    /// One skeleton by id.
+    pub async fn skeleton(&self, id: i64) -> Result<Option<SkeletonRow>, StoreError> {
+        Ok(self.skeletons().await?.into_iter().find(|s| s.id == id))
+    }
+
+    /// Deletes a clip and its captions; false when there was no such clip.
+    pub async fn delete_clip(&self, id: i64) -> Result<bool, StoreError> {
+        let mut tx = self.pool.begin().await?;
+        sqlx::query("DELETE FROM captions WHERE clip_id = $1").bind(id).execute(&mut *tx).await?;
+        let deleted = sqlx::query("DELETE FROM clips WHERE id = $1").bind(id).execute(&mut *tx).await?.rows_affected();
+        tx.commit().await?;
+        Ok(deleted > 0)
+    }
+
+    /// A cheap signature of the clips stored (count and largest id): it changes whenever a
+    /// clip is added or deleted, so a replica can tell when to sync its search index.
+    pub async fn clips_signature(&self) -> Result<(i64, i64), StoreError> {
+        let row = sqlx::query("SELECT COUNT(*), CAST(COALESCE(MAX(id), 0) AS BIGINT) FROM clips")
+            .fetch_one(&self.pool)
+            .await?;
+        Ok((row.try_get(0)?, row.try_get(1)?))
+    }
+
+    /// True when the database answers.
+    pub async fn ping(&self) -> Result<(), StoreError> {
+        sqlx::query("SELECT 1").execute(&self.pool).await?;
+        Ok(())
     }
 
     /// Every stored clip's content as comparable text lines (path, hash, skeleton fingerprint,
@@ -513,6 +578,14 @@ impl Store {
         out.sort();
         Ok(out)
     }
+}
+
+/// The bytes of a stored gzip blob.
+fn gunzip(gz: &[u8]) -> Result<Vec<u8>, StoreError> {
+    let mut text = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::MultiGzDecoder::new(gz), &mut text)
+        .map_err(|e| StoreError::Corrupt(format!("stored gzip: {e}")))?;
+    Ok(text)
 }
 
 fn clip_row(r: &AnyRow, captions: Vec<String>) -> Result<ClipRow, StoreError> {

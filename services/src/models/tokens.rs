@@ -1,0 +1,118 @@
+//! Motion to TAT tokens and back, on the source skeleton or any other, as users meet it: the
+//! CLI's `tokenize`, `detokenize` and `transfer` and the server's token endpoints use it.
+
+use super::codecs::Graphs;
+use super::data::MODEL_FPS;
+use super::shipped;
+use super::studio::Refusal;
+use anyhow::Result;
+use anymo_tokenizer::motion::Motion;
+use anymo_tokenizer::prep::clean::{CleanClip, CleanOptions, clean};
+use anymo_tokenizer::skeleton::Skeleton;
+use anymo_tokenizer::tat::Tat;
+use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
+use anymo_tokenizer::text::{CachedEncoder, SentenceEncoder};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The tokens file: the tokens and the checkpoint that made them.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TokenFile {
+    /// The tokenizer checkpoint's name.
+    pub model: String,
+    /// Its training steps (which version of it).
+    pub model_steps: u64,
+    /// The tokens.
+    pub tokens: Tokens,
+}
+
+/// A trained tokenizer with the sentence encoder its skeleton graphs need.
+pub struct TokenCodec {
+    tat: Tat,
+    name: String,
+    steps: u64,
+    encoder: CachedEncoder,
+}
+
+/// A clip cleaned and at the models' frame rate.
+fn cleaned_clip(motion: &Motion) -> Result<CleanClip> {
+    if motion.frames() == 0 {
+        return Err(Refusal("the clip has no frames of motion".into()).into());
+    }
+    let cleaned =
+        clean(motion, &CleanOptions::default()).map_err(|r| Refusal(format!("the clip cannot be used: {r}")))?;
+    Ok(CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned })
+}
+
+impl TokenCodec {
+    /// Loads tokenizer checkpoint `name` from `checkpoints`.
+    pub fn load(checkpoints: &Path, name: &str, encoder: SentenceEncoder) -> Result<TokenCodec> {
+        let mut encoder = CachedEncoder::new(encoder);
+        let (tat, card) = shipped::load_tat(checkpoints, name, &mut encoder)?;
+        Ok(TokenCodec { tat, name: name.to_string(), steps: card.steps, encoder })
+    }
+
+    /// A clip's tokens.
+    pub fn tokenize(&mut self, motion: &Motion) -> Result<TokenFile> {
+        let cleaned = cleaned_clip(motion)?;
+        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
+        let tokens = tokenize(&mut self.tat, &graph, &cleaned.motion)?;
+        Ok(TokenFile { model: self.name.clone(), model_steps: self.steps, tokens })
+    }
+
+    /// Tokens as motion on `skeleton` (in its units, with its hierarchy and channels), refused
+    /// when they do not fit this checkpoint or do not describe a clip.
+    pub fn detokenize(&mut self, tokens: &Tokens, skeleton: &Skeleton) -> Result<Motion> {
+        self.check(tokens).map_err(Refusal)?;
+        let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
+        let cleaned = clean(&rest, &CleanOptions::default())
+            .map_err(|r| Refusal(format!("the skeleton cannot be used as a target: {r}")))?;
+        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
+        let decoded = detokenize(&self.tat, tokens, &graph, cleaned.motion.skeleton())?;
+        Ok(cleaned.restore(&decoded, &rest))
+    }
+
+    /// Why tokens (perhaps from a client) cannot be decoded by this checkpoint, if they cannot:
+    /// the codes must fit its codebooks, every window must hold the same whole number of steps
+    /// and cover the window, and the windows must start inside the clip, in order, covering it.
+    fn check(&self, tokens: &Tokens) -> Result<(), String> {
+        let (layers, codes) = (self.tat.config().rvq.layers, self.tat.config().rvq.codes as u32);
+        let per_token = self.tat.config().tat.frames_per_token();
+        let steps = tokens.codes.first().map_or(0, Vec::len);
+        let depth = tokens.codes.first().and_then(|w| w.first()).map_or(0, Vec::len);
+        if steps == 0 || depth == 0 {
+            return Err("the tokens hold no steps".into());
+        }
+        if depth > layers || tokens.codes.iter().flatten().flatten().any(|&c| c >= codes) {
+            return Err(format!("the tokens do not fit checkpoint {} ({layers} layers of {codes} codes)", self.name));
+        }
+        if tokens.codes.iter().any(|w| w.len() != steps || w.iter().any(|step| step.len() != depth)) {
+            return Err(format!("every window must hold {steps} steps of {depth} codes, as the first does"));
+        }
+        if tokens.window != steps * per_token {
+            return Err(format!(
+                "a window of {steps} steps covers {} frames, not {}",
+                steps * per_token,
+                tokens.window
+            ));
+        }
+        let ordered = tokens.starts.first() == Some(&0) && tokens.starts.windows(2).all(|p| p[0] < p[1]);
+        if tokens.starts.len() != tokens.codes.len() || !ordered {
+            return Err("starts must be one ascending first frame per window, from 0".into());
+        }
+        let last = *tokens.starts.last().expect("one start per window");
+        if tokens.frames == 0 || last >= tokens.frames || tokens.frames > last + tokens.window {
+            return Err(format!("{} frames are not covered by windows starting at {:?}", tokens.frames, tokens.starts));
+        }
+        if !(tokens.fps > 0.0 && tokens.fps <= 1000.0) || !tokens.start.iter().all(|v| v.is_finite()) {
+            return Err("fps must be in (0, 1000] and the start finite".into());
+        }
+        Ok(())
+    }
+
+    /// A clip moved onto `skeleton` through tokens.
+    pub fn transfer(&mut self, motion: &Motion, skeleton: &Skeleton) -> Result<Motion> {
+        let file = self.tokenize(motion)?;
+        self.detokenize(&file.tokens, skeleton)
+    }
+}

@@ -1,0 +1,112 @@
+//! Model workers behind a bounded queue. The models are CPU-bound and hold caches, so each
+//! worker is a thread that owns its own copy and runs one task at a time; requests wait in a
+//! queue of fixed depth, and a request that finds it full is answered 429 at once instead of
+//! piling up. A task that waited past its deadline is dropped unrun.
+
+use super::error::ApiError;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::oneshot;
+
+type Task<M> = Box<dyn FnOnce(&mut M) + Send>;
+
+/// A pool of workers, each owning an `M`.
+pub struct Engine<M> {
+    name: &'static str,
+    queue: SyncSender<Task<M>>,
+    capacity: usize,
+    waiting: Arc<AtomicUsize>,
+}
+
+impl<M> Clone for Engine<M> {
+    fn clone(&self) -> Engine<M> {
+        Engine { name: self.name, queue: self.queue.clone(), capacity: self.capacity, waiting: self.waiting.clone() }
+    }
+}
+
+impl<M: 'static> Engine<M> {
+    /// Starts one worker per model; up to `capacity` tasks wait for them.
+    pub fn start(name: &'static str, models: Vec<M>, capacity: usize) -> Engine<M>
+    where
+        M: Send,
+    {
+        let (queue, tasks) = sync_channel::<Task<M>>(capacity);
+        let tasks = Arc::new(Mutex::new(tasks));
+        let waiting = Arc::new(AtomicUsize::new(0));
+        for (k, mut model) in models.into_iter().enumerate() {
+            let tasks = tasks.clone();
+            std::thread::Builder::new()
+                .name(format!("anymo-{name}-{k}"))
+                .spawn(move || {
+                    while let Some(task) = next(&tasks) {
+                        task(&mut model);
+                    }
+                })
+                .expect("starting a worker thread");
+        }
+        Engine { name, queue, capacity, waiting }
+    }
+
+    /// Tasks waiting for a worker now.
+    pub fn waiting(&self) -> usize {
+        self.waiting.load(Ordering::Relaxed)
+    }
+
+    /// Runs `work` on a worker and waits for its answer, at most `timeout` in all.
+    pub async fn run<T: Send + 'static>(
+        &self,
+        timeout: Duration,
+        work: impl FnOnce(&mut M) -> Result<T, ApiError> + Send + 'static,
+    ) -> Result<T, ApiError> {
+        let deadline = Instant::now() + timeout;
+        let (answer, answered) = oneshot::channel();
+        let waiting = self.waiting.clone();
+        let task: Task<M> = Box::new(move |model: &mut M| {
+            waiting.fetch_sub(1, Ordering::Relaxed);
+            if Instant::now() >= deadline || answer.is_closed() {
+                return;
+            }
+            // A request that panics a model answers an error and leaves the worker running.
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(model)))
+                .unwrap_or_else(|_| Err(ApiError::internal("the model failed on this request (it panicked)")));
+            let _ = answer.send(result);
+        });
+        self.waiting.fetch_add(1, Ordering::Relaxed);
+        if let Err(e) = self.queue.try_send(task) {
+            self.waiting.fetch_sub(1, Ordering::Relaxed);
+            return Err(match e {
+                TrySendError::Full(_) => ApiError::busy(self.name, self.capacity),
+                TrySendError::Disconnected(_) => {
+                    ApiError::unavailable(format!("the {} workers have stopped", self.name))
+                }
+            });
+        }
+        match tokio::time::timeout(timeout, answered).await {
+            Ok(Ok(result)) => result,
+            Ok(Err(_)) => Err(ApiError::timeout(timeout.as_secs_f64())),
+            Err(_) => Err(ApiError::timeout(timeout.as_secs_f64())),
+        }
+    }
+
+    /// Queues `work` without waiting for it; false when the queue is full.
+    pub fn spawn(&self, work: impl FnOnce(&mut M) + Send + 'static) -> bool {
+        let waiting = self.waiting.clone();
+        waiting.fetch_add(1, Ordering::Relaxed);
+        let task: Task<M> = Box::new(move |model: &mut M| {
+            waiting.fetch_sub(1, Ordering::Relaxed);
+            work(model)
+        });
+        let queued = self.queue.try_send(task).is_ok();
+        if !queued {
+            self.waiting.fetch_sub(1, Ordering::Relaxed);
+        }
+        queued
+    }
+}
+
+/// The next task, or `None` once every sender is gone (the server stopped).
+fn next<M>(tasks: &Mutex<Receiver<Task<M>>>) -> Option<Task<M>> {
+    tasks.lock().ok()?.recv().ok()
+}
