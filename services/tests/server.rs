@@ -28,21 +28,17 @@ impl Drop for Served {
     }
 }
 
-fn anymo(data: &Path, models: &Path) -> Command {
+fn anymo(data: &Path, models: &Path, args: &[&str]) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_anymo"));
-    command
-        .arg("--data-dir")
-        .arg(data)
-        .env("ANYMO_MODELS", models)
-        .env_remove("DATABASE_URL")
-        .env_remove("ANYMO_API_KEYS");
+    command.args(args).arg("--data-dir").arg(data).env("ANYMO_MODELS", models);
+    command.env_remove("DATABASE_URL").env_remove("ANYMO_API_KEYS");
     command
 }
 
 /// Starts a server on a free port and waits for the line that gives its address.
 fn serve(data: &Path, models: &Path, extra: &[&str], env: &[(&str, &str)]) -> Served {
-    let mut command = anymo(data, models);
-    command.args(["serve", "--addr", "127.0.0.1:0", "--api-key", KEY]).args(extra);
+    let mut command = anymo(data, models, &["serve", "--addr", "127.0.0.1:0", "--api-key", KEY]);
+    command.args(extra);
     for (k, v) in env {
         command.env(k, v);
     }
@@ -120,7 +116,7 @@ fn rest_and_grpc_serve_every_capability() {
     let scratch = scratch_dir("server");
     let data = scratch.join("data");
     let list = library(&shared, &scratch);
-    succeeded(anymo(&data, &models).args(["ingest", list.to_str().unwrap()]).output().unwrap());
+    succeeded(anymo(&data, &models, &["ingest", list.to_str().unwrap()]).output().unwrap());
     let server = serve(&data, &models, &["--max-body-bytes", "4000000"], &[]);
     let base = server.base.clone();
     let husky_path = shared.join("quaternius/bvh/animals_pack/Husky__Walk.bvh.gz");
@@ -351,8 +347,7 @@ fn rest_and_grpc_serve_every_capability() {
         refused(response, 400, "bad_bvh", "\"broken.bvh\" is not a valid BVH file: line ").await;
         // The husky walk is stored already; a second copy under a new name is "already stored".
         let mut changed = husky.clone();
-        let at = changed.len() - 2;
-        changed.insert(at, b' ');
+        changed.extend_from_slice(b"\n");
         let form = upload()
             .part("files", file(changed, "another.bvh"))
             .part("files", file(b"a husky prances proudly\n".to_vec(), "another.txt"));
@@ -433,7 +428,8 @@ async fn grpc(base: &str, husky: &[u8], husky_joints: &[String]) {
     use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
     use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
     use tonic_reflection::pb::v1::{ServerReflectionRequest, server_reflection_response::MessageResponse};
-    let mut reflection = ServerReflectionClient::connect(base.to_string()).await.unwrap();
+    let channel = tonic::transport::Channel::from_shared(base.to_string()).unwrap().connect().await.unwrap();
+    let mut reflection = ServerReflectionClient::new(channel);
     let request = ServerReflectionRequest {
         host: String::new(),
         message_request: Some(MessageRequest::ListServices(String::new())),
@@ -567,14 +563,14 @@ fn sigkill_during_an_upload_ingest_loses_nothing() {
         std::os::unix::fs::symlink(path, folder.join(path.file_name().unwrap())).unwrap();
     }
     let straight = scratch.join("straight");
-    succeeded(anymo(&straight, &models).args(["ingest", "--no-index", folder.to_str().unwrap()]).output().unwrap());
+    succeeded(anymo(&straight, &models, &["ingest", "--no-index", folder.to_str().unwrap()]).output().unwrap());
     assert_eq!(content_hashes(&data), content_hashes(&straight));
     assert_eq!(content_hashes(&data).len(), clip_count(&data, &models));
 }
 
 /// Clips in a data directory's store, by `anymo corpus stats`.
 fn clip_count(data: &Path, models: &Path) -> usize {
-    let out = succeeded(anymo(data, models).args(["corpus", "stats"]).output().unwrap());
+    let out = succeeded(anymo(data, models, &["corpus", "stats"]).output().unwrap());
     let text = String::from_utf8_lossy(&out.stdout);
     text.split_whitespace().next().unwrap().parse().unwrap()
 }
