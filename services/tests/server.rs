@@ -638,3 +638,40 @@ fn two_replicas_serve_one_postgres_corpus() {
         sqlx::query(sqlx::AssertSqlSafe(format!("DROP DATABASE {name} WITH (FORCE)"))).execute(&pool).await.unwrap();
     });
 }
+
+/// Schemathesis fuzzes every operation of the OpenAPI document (with a key, so writes are
+/// reached too) and the server answers no request with a 5xx. Runs when schemathesis is in
+/// `target/schemathesis` (`bash tools/setup.sh --test-tools`, as `.ci/run` does) or where
+/// `ANYMO_SCHEMATHESIS` says; `ANYMO_SCHEMATHESIS_SECONDS` sets the budget (default 60).
+#[test]
+fn schemathesis_finds_no_server_error() {
+    let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
+    let program = std::env::var_os("ANYMO_SCHEMATHESIS").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/schemathesis/bin/schemathesis"),
+        PathBuf::from,
+    );
+    if !program.is_file() {
+        eprintln!("skipping: no schemathesis at {} (bash tools/setup.sh --test-tools)", program.display());
+        return;
+    }
+    let seconds = std::env::var("ANYMO_SCHEMATHESIS_SECONDS").unwrap_or_else(|_| "60".into());
+    let scratch = scratch_dir("server-schemathesis");
+    let data = scratch.join("data");
+    let list = library(&shared, &scratch);
+    succeeded(anymo(&data, &models, &["ingest", list.to_str().unwrap()]).output().unwrap());
+    let server = serve(&data, &models, &[], &[]);
+    let out = Command::new(program)
+        .args(["run", &format!("{}/openapi.json", server.base), "--checks", "not_a_server_error"])
+        .args(["--max-time", &seconds, "--workers", "2", "-H", &format!("x-api-key: {KEY}")])
+        .current_dir(&scratch)
+        .output()
+        .expect("schemathesis runs");
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "schemathesis found failures:\n{report}");
+    let cases = report.lines().find(|l| l.contains(" generated, ")).expect("a test-case count");
+    assert!(cases.contains("passed") && !cases.contains("failed"), "{cases}");
+    let metrics = runtime()
+        .block_on(async { reqwest::get(format!("{}/metrics", server.base)).await.unwrap().text().await.unwrap() });
+    assert!(!metrics.contains("status=\"5"), "no request was answered 5xx:\n{metrics}");
+    eprintln!("schemathesis: {}", cases.trim());
+}

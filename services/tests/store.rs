@@ -3,7 +3,7 @@
 //! databases from): idempotent ingest, exact export, matching migrations on both databases.
 
 use anymo_services::ingest::{Item, Progress, ingest, items_from_manifest};
-use anymo_services::store::Store;
+use anymo_services::store::{JobFile, JobStatus, NewGeneration, Store};
 use anymo_tests::{data_dir, scratch_dir};
 use anymo_tokenizer::text::{CachedEncoder, MODEL_DIR_NAME, SentenceEncoder};
 use std::io::Read;
@@ -66,6 +66,39 @@ async fn contract(store: &Store, encoder: &mut CachedEncoder, items: &[Item]) {
         assert!(store.clip_bvh(id).await.unwrap().unwrap() == original, "clip {id} exports its original bytes");
     }
     assert!(store.clip(1_000_000).await.unwrap().is_none());
+    server_contract(store).await;
+}
+
+/// What the server keeps: results round-trip, and a job is claimed by one replica at a time,
+/// taken over only once its owner stops reporting.
+async fn server_contract(store: &Store) {
+    let samples = [b"first".to_vec(), b"second".to_vec()];
+    let request = serde_json::json!({ "prompt": "a dog walks" });
+    let new = NewGeneration { kind: "generate", request: request.clone(), frames: 60, fps: 30.0, samples: &samples };
+    let id = store.insert_generation(&new).await.unwrap();
+    let stored = store.generation(id).await.unwrap().unwrap();
+    assert_eq!((stored.kind.as_str(), stored.samples, stored.frames, stored.request), ("generate", 2, 60, request));
+    assert_eq!(store.generation_sample(id, 1).await.unwrap().unwrap(), b"second");
+    assert!(store.generation_sample(id, 2).await.unwrap().is_none());
+
+    let files = vec![JobFile { name: "a.bvh".into(), captions: vec!["walks".into()], bytes: b"BVH".to_vec() }];
+    let job = store.insert_job("ingest", &serde_json::json!({ "licence": "CC0-1.0" }), &files).await.unwrap();
+    let claimed = store.claim_job("replica-a", 60_000).await.unwrap().expect("a queued job");
+    assert_eq!((claimed.id, claimed.status, claimed.total), (job, JobStatus::Running, 1));
+    assert!(store.claim_job("replica-b", 60_000).await.unwrap().is_none(), "a running job is not claimed twice");
+    store.job_progress(job, 1).await.unwrap();
+    tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    let taken = store.claim_job("replica-b", 1).await.unwrap().expect("a job whose owner went quiet");
+    assert_eq!((taken.id, taken.done), (job, 1));
+    assert_eq!(store.requeue_jobs_of("replica-b").await.unwrap(), 1);
+    assert_eq!(store.job(job).await.unwrap().unwrap().status, JobStatus::Queued);
+    assert_eq!(store.job_files(job).await.unwrap()[0].captions, ["walks"]);
+    store.claim_job("replica-a", 60_000).await.unwrap().expect("the requeued job");
+    store.finish_job(job, Ok(&serde_json::json!({ "added": 1 })), 1).await.unwrap();
+    let done = store.job(job).await.unwrap().unwrap();
+    assert_eq!((done.status, done.result), (JobStatus::Done, Some(serde_json::json!({ "added": 1 }))));
+    assert!(store.job_files(job).await.unwrap().is_empty(), "a finished job's upload is dropped");
+    assert!(store.claim_job("replica-a", 1).await.unwrap().is_none(), "a finished job is never claimed");
 }
 
 #[test]

@@ -123,7 +123,7 @@ impl Studio {
     /// New motion for a prompt on a target: `request.samples` code sequences.
     pub fn generate(&mut self, prompt: &str, target: &Target, request: &Request) -> Result<Vec<Codes>> {
         let text = self.text(prompt)?;
-        Ok(self.generator.generate(&text, &target.embedding, request).map_err(refusal_of)?)
+        self.generator.generate(&text, &target.embedding, request).map_err(refusal_of)
     }
 
     /// New motion for a prompt on a target, rendered: `seconds` long, or as long as the length

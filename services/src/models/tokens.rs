@@ -104,7 +104,7 @@ impl TokenCodec {
         if tokens.frames == 0 || last >= tokens.frames || tokens.frames > last + tokens.window {
             return Err(format!("{} frames are not covered by windows starting at {:?}", tokens.frames, tokens.starts));
         }
-        if !(tokens.fps > 0.0 && tokens.fps <= 1000.0) || !tokens.start.iter().all(|v| v.is_finite()) {
+        if !(tokens.fps > 0.0 && tokens.fps <= 1000.0 && tokens.start.iter().all(|v| v.is_finite())) {
             return Err("fps must be in (0, 1000] and the start finite".into());
         }
         Ok(())

@@ -29,7 +29,7 @@ impl SearchWorker {
     }
 
     /// Clips searchable now.
-    pub fn len(&self) -> usize {
+    pub fn searchable(&self) -> usize {
         self.library.len()
     }
 
