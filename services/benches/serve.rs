@@ -4,7 +4,7 @@
 //! no JSON), so the ratio is what the server itself adds.
 //!
 //! Run after the README's main command has filled `anymo-data` (or set `ANYMO_DATA_DIR`):
-//! `cargo bench -p anymo-services --bench serve`.
+//! `cargo bench -p anymo-services --bench serve`. Every query and prompt is new text.
 
 use anymo_services::models::shipped;
 use anymo_services::server::generation::{self, SamplingOptions};
@@ -18,6 +18,11 @@ use std::time::{Duration, Instant};
 
 const QUERIES: [&str; 6] =
     ["a horse gallops", "a person walks", "a dog jumps", "someone bows angrily", "a spider attacks", "kick"];
+
+/// Query or prompt `k`: every one is new text, so the sentence encoder's cache never answers it.
+fn text(k: usize) -> String {
+    format!("{} {k}", QUERIES[k % QUERIES.len()])
+}
 
 struct Tally {
     latencies: Vec<f64>,
@@ -79,7 +84,8 @@ where
 }
 
 fn main() -> anyhow::Result<()> {
-    let data_dir = PathBuf::from(std::env::var("ANYMO_DATA_DIR").unwrap_or_else(|_| "anymo-data".into()));
+    let data_dir = std::env::var_os("ANYMO_DATA_DIR")
+        .map_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data"), PathBuf::from);
     let models_dir = std::env::var_os("ANYMO_MODELS").map_or_else(|| data_dir.join("models"), PathBuf::from);
     let seconds: u64 = std::env::var("ANYMO_BENCH_SECONDS").ok().and_then(|s| s.parse().ok()).unwrap_or(20);
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
@@ -118,7 +124,7 @@ fn main() -> anyhow::Result<()> {
         // Reference: the operations in-process, one at a time.
         let mut reference = Vec::new();
         for k in 0..50 {
-            let params = SearchParams { q: Some(QUERIES[k % QUERIES.len()].into()), ..Default::default() };
+            let params = SearchParams { q: Some(text(1_000_000 + k)), ..Default::default() };
             let t = Instant::now();
             search(&state, params, None).await.map_err(|e| anyhow::anyhow!(e.message))?;
             reference.push(t.elapsed().as_secs_f64());
@@ -146,8 +152,10 @@ fn main() -> anyhow::Result<()> {
         let duration = Duration::from_secs(seconds);
         for clients in [1, 8] {
             let (client, base) = (client.clone(), base.clone());
+            let base_k = clients * 100_000;
             let mut tally = load(clients, duration, move |k| {
-                let url = format!("{base}/v1/search?q={}&limit=10", QUERIES[k % QUERIES.len()].replace(' ', "%20"));
+                let k = base_k + k;
+                let url = format!("{base}/v1/search?q={}&limit=10", text(k).replace(' ', "%20"));
                 let client = client.clone();
                 async move { client.get(url).send().await.is_ok_and(|r| r.status().is_success()) }
             })
@@ -155,10 +163,12 @@ fn main() -> anyhow::Result<()> {
             tally.report(&format!("search, {clients} clients"), search_reference);
         }
         for clients in [1, 4] {
+            let base_k = clients * 100_000;
             let (client, base, skeleton) = (client.clone(), base.clone(), skeleton.clone());
             let mut tally = load(clients, duration, move |k| {
+                let k = base_k + k;
                 let form = reqwest::multipart::Form::new()
-                    .text("prompt", QUERIES[k % QUERIES.len()])
+                    .text("prompt", text(k))
                     .text("seconds", "4")
                     .text("seed", k.to_string())
                     .part("skeleton", reqwest::multipart::Part::bytes(skeleton.clone()).file_name("s.bvh"));

@@ -3,8 +3,8 @@
 //!
 //! `cargo run --release -p anymo-services --example grpc_client -- http://127.0.0.1:8080 SKELETON.bvh "a dog walks" OUT.bvh`
 
-use anymo_services::server::grpc::proto;
 use anyhow::{Context, Result};
+use anymo_services::server::grpc::proto;
 use proto::anymo_client::AnymoClient;
 
 #[tokio::main(flavor = "current_thread")]
@@ -15,7 +15,10 @@ async fn main() -> Result<()> {
     };
     let mut client = AnymoClient::connect(server.clone()).await.with_context(|| format!("connecting to {server}"))?;
     let health = client.health(proto::HealthRequest {}).await?.into_inner();
-    println!("server {} ({}): {} clips, {} searchable", health.status, health.version, health.clips, health.searchable_clips);
+    println!(
+        "server {} ({}): {} clips, {} searchable",
+        health.status, health.version, health.clips, health.searchable_clips
+    );
 
     let bvh = std::fs::read_to_string(skeleton).with_context(|| format!("reading {skeleton}"))?;
     let request = proto::GenerateRequest {
@@ -33,7 +36,10 @@ async fn main() -> Result<()> {
         .await?
         .into_inner();
     for hit in found.hits {
-        println!("#{} clip {} {} ({}, {:.1} s): {}", hit.rank, hit.clip_id, hit.path, hit.subject, hit.seconds, hit.caption);
+        println!(
+            "#{} clip {} {} ({}, {:.1} s): {}",
+            hit.rank, hit.clip_id, hit.path, hit.subject, hit.seconds, hit.caption
+        );
     }
     Ok(())
 }
