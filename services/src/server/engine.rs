@@ -110,3 +110,82 @@ impl<M: 'static> Engine<M> {
 fn next<M>(tasks: &Mutex<Receiver<Task<M>>>) -> Option<Task<M>> {
     tasks.lock().ok()?.recv().ok()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicBool;
+    use std::sync::mpsc::channel;
+
+    /// A worker whose model blocks each task until the test releases it.
+    fn gated() -> (Engine<Receiver<()>>, std::sync::mpsc::Sender<()>) {
+        let (release, gate) = channel();
+        (Engine::start("test", vec![gate], 1), release)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_full_queue_refuses_at_once_and_the_queued_task_still_runs() {
+        let (engine, release) = gated();
+        let long = Duration::from_secs(30);
+        let running = tokio::spawn({
+            let engine = engine.clone();
+            async move { engine.run(long, |gate| Ok(gate.recv().is_ok())).await }
+        });
+        // The worker takes the first task off the queue and blocks on it.
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let queued = tokio::spawn({
+            let engine = engine.clone();
+            async move { engine.run(long, |gate| Ok(gate.recv().is_ok())).await }
+        });
+        while engine.waiting() == 0 {
+            tokio::task::yield_now().await;
+        }
+        let refused = engine.run(long, |_| Ok(true)).await.unwrap_err();
+        assert_eq!((refused.code, refused.retry_after), ("busy", Some(1)));
+        assert!(refused.message.contains("(1 waiting)"), "{}", refused.message);
+        release.send(()).unwrap();
+        release.send(()).unwrap();
+        assert!(running.await.unwrap().unwrap());
+        assert!(queued.await.unwrap().unwrap());
+        assert_eq!(engine.waiting(), 0);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_task_past_its_deadline_times_out_and_never_runs() {
+        let (engine, release) = gated();
+        let blocker = tokio::spawn({
+            let engine = engine.clone();
+            async move { engine.run(Duration::from_secs(30), |gate| Ok(gate.recv().is_ok())).await }
+        });
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let ran = Arc::new(AtomicBool::new(false));
+        let flag = ran.clone();
+        let late = engine
+            .run(Duration::from_millis(50), move |_| {
+                flag.store(true, Ordering::SeqCst);
+                Ok(())
+            })
+            .await;
+        assert_eq!(late.unwrap_err().code, "timeout");
+        release.send(()).unwrap();
+        assert!(blocker.await.unwrap().unwrap());
+        // The worker has taken the expired task off the queue by the time it answers the next.
+        engine.run(Duration::from_secs(30), |_| Ok(())).await.unwrap();
+        assert!(!ran.load(Ordering::SeqCst), "a task whose client gave up is dropped unrun");
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_panicking_task_answers_an_error_and_the_worker_goes_on() {
+        let engine = Engine::start("test", vec![0u32], 4);
+        let failed =
+            engine.run(Duration::from_secs(30), |_: &mut u32| -> Result<(), ApiError> { panic!("boom") }).await;
+        assert_eq!(failed.unwrap_err().code, "internal");
+        let counted = engine
+            .run(Duration::from_secs(30), |n: &mut u32| {
+                *n += 1;
+                Ok(*n)
+            })
+            .await;
+        assert_eq!(counted.unwrap(), 1);
+    }
+}
