@@ -470,7 +470,13 @@ fn a_full_queue_answers_429_and_shutdown_finishes_in_flight_work() {
 
         // SIGTERM with a generation in flight: it is answered, then the server exits cleanly.
         let in_flight = tokio::spawn(request("20"));
-        tokio::time::sleep(Duration::from_millis(300)).await;
+        loop {
+            let health: Value = client.get(format!("{base}/v1/health")).send().await.unwrap().json().await.unwrap();
+            if health["generation_running"] == 1 {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
         let pid = server.child.id().to_string();
         succeeded(Command::new("kill").args(["-TERM", &pid]).output().unwrap());
         let response = in_flight.await.unwrap().unwrap();

@@ -18,11 +18,18 @@ pub struct Engine<M> {
     queue: SyncSender<Task<M>>,
     capacity: usize,
     waiting: Arc<AtomicUsize>,
+    active: Arc<AtomicUsize>,
 }
 
 impl<M> Clone for Engine<M> {
     fn clone(&self) -> Engine<M> {
-        Engine { name: self.name, queue: self.queue.clone(), capacity: self.capacity, waiting: self.waiting.clone() }
+        Engine {
+            name: self.name,
+            queue: self.queue.clone(),
+            capacity: self.capacity,
+            waiting: self.waiting.clone(),
+            active: self.active.clone(),
+        }
     }
 }
 
@@ -35,23 +42,31 @@ impl<M: 'static> Engine<M> {
         let (queue, tasks) = sync_channel::<Task<M>>(capacity);
         let tasks = Arc::new(Mutex::new(tasks));
         let waiting = Arc::new(AtomicUsize::new(0));
+        let active = Arc::new(AtomicUsize::new(0));
         for (k, mut model) in models.into_iter().enumerate() {
-            let tasks = tasks.clone();
+            let (tasks, active) = (tasks.clone(), active.clone());
             std::thread::Builder::new()
                 .name(format!("anymo-{name}-{k}"))
                 .spawn(move || {
                     while let Some(task) = next(&tasks) {
+                        active.fetch_add(1, Ordering::SeqCst);
                         task(&mut model);
+                        active.fetch_sub(1, Ordering::SeqCst);
                     }
                 })
                 .expect("starting a worker thread");
         }
-        Engine { name, queue, capacity, waiting }
+        Engine { name, queue, capacity, waiting, active }
     }
 
     /// Tasks waiting for a worker now.
     pub fn waiting(&self) -> usize {
         self.waiting.load(Ordering::Relaxed)
+    }
+
+    /// Tasks a worker is running now.
+    pub fn active(&self) -> usize {
+        self.active.load(Ordering::SeqCst)
     }
 
     /// Runs `work` on a worker and waits for its answer, at most `timeout` in all.

@@ -18,6 +18,8 @@ pub struct Health {
     pub version: String,
     /// Clips in the store.
     pub clips: i64,
+    /// Requests a generation worker is running.
+    pub generation_running: usize,
     /// Requests waiting for a generation worker.
     pub generation_waiting: usize,
     /// Requests waiting for the search worker.
@@ -35,6 +37,7 @@ pub async fn health(State(state): State<Arc<AppState>>) -> Result<axum::Json<Hea
         status: "ok".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         clips,
+        generation_running: state.generation.active(),
         generation_waiting: state.generation.waiting(),
         search_waiting: state.search.waiting(),
     }))
