@@ -98,10 +98,15 @@ fn library(shared: &Path, scratch: &Path) -> PathBuf {
     })
 }
 
+/// The JSON answer of a GET.
+async fn get_json(client: &reqwest::Client, url: impl reqwest::IntoUrl) -> Value {
+    client.get(url).send().await.expect("an answer").json().await.expect("a JSON answer")
+}
+
 async fn wait_for_job(client: &reqwest::Client, base: &str, id: i64) -> Value {
     let started = Instant::now();
     loop {
-        let job: Value = client.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap().json().await.unwrap();
+        let job: Value = get_json(client, format!("{base}/v1/jobs/{id}")).await;
         if job["status"] == "done" || job["status"] == "failed" {
             return job;
         }
@@ -124,13 +129,13 @@ fn rest_and_grpc_serve_every_capability() {
     let husky_joints = joint_names(&husky);
     runtime().block_on(async {
         let client = reqwest::Client::new();
-        let health: Value = client.get(format!("{base}/v1/health")).send().await.unwrap().json().await.unwrap();
+        let health: Value = get_json(&client, format!("{base}/v1/health")).await;
         let clips = health["clips"].as_i64().unwrap();
         assert!(clips > 20, "{health}");
         assert_eq!(client.get(format!("{base}/v1/ready")).send().await.unwrap().status(), 200);
 
         // The OpenAPI document names every endpoint, and the docs page is served.
-        let api: Value = client.get(format!("{base}/openapi.json")).send().await.unwrap().json().await.unwrap();
+        let api: Value = get_json(&client, format!("{base}/openapi.json")).await;
         assert!(api["openapi"].as_str().unwrap().starts_with("3."));
         for path in ["/v1/generate", "/v1/edit/inpaint", "/v1/transfer", "/v1/tokenize", "/v1/search", "/v1/ingest"] {
             assert!(api["paths"][path].is_object(), "{path} is documented");
@@ -153,8 +158,7 @@ fn rest_and_grpc_serve_every_capability() {
         // The result is stored and fetched again byte for byte.
         let again = client.get(format!("{base}/v1/generations/{id}/samples/0")).send().await.unwrap();
         assert_eq!(again.bytes().await.unwrap().to_vec(), bvh_text);
-        let record: Value =
-            client.get(format!("{base}/v1/generations/{id}")).send().await.unwrap().json().await.unwrap();
+        let record: Value = get_json(&client, format!("{base}/v1/generations/{id}")).await;
         assert_eq!(record["request"]["prompt"], "a dog walks");
 
         // JSON: every sample with its BVH; sample 0 of seed 0 is the motion above.
@@ -179,7 +183,7 @@ fn rest_and_grpc_serve_every_capability() {
         assert_ne!(samples[0]["bvh"], samples[1]["bvh"]);
 
         // JSON with a stored skeleton.
-        let skeletons: Value = client.get(format!("{base}/v1/skeletons")).send().await.unwrap().json().await.unwrap();
+        let skeletons: Value = get_json(&client, format!("{base}/v1/skeletons")).await;
         let horse = skeletons.as_array().unwrap().iter().find(|s| s["joints"] == 51).expect("the horse rig");
         let horse_id = horse["id"].as_i64().unwrap();
         let horse_bvh =
@@ -230,21 +234,14 @@ fn rest_and_grpc_serve_every_capability() {
             .await;
 
         // The corpus: pages of clips, a clip's record and its exact bytes.
-        let page: Value = client.get(format!("{base}/v1/clips?limit=500")).send().await.unwrap().json().await.unwrap();
+        let page: Value = get_json(&client, format!("{base}/v1/clips?limit=500")).await;
         let page = page.as_array().unwrap();
         assert_eq!(page.len() as i64, clips);
         let walk = page.iter().find(|c| c["path"].as_str().unwrap().ends_with("Husky__Walk.bvh.gz")).unwrap();
         let walk_id = walk["id"].as_i64().unwrap();
         let stored = client.get(format!("{base}/v1/clips/{walk_id}/bvh")).send().await.unwrap().bytes().await.unwrap();
         assert!(stored.to_vec() == husky, "a clip downloads exactly as ingested");
-        let next: Value = client
-            .get(format!("{base}/v1/clips?after={}&limit=2", page[0]["id"]))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let next: Value = get_json(&client, format!("{base}/v1/clips?after={}&limit=2", page[0]["id"])).await;
         assert_eq!(next[0]["id"], page[1]["id"]);
 
         // Edit: continuing the husky's walk by 1 s adds 30 frames at 30 fps.
@@ -292,33 +289,12 @@ fn rest_and_grpc_serve_every_capability() {
         .await;
 
         // Search: by text with a filter, by stored example, by uploaded example.
-        let page: Value = client
-            .get(format!("{base}/v1/search?q=a%20horse%20gallops&limit=3"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let page: Value = get_json(&client, format!("{base}/v1/search?q=a%20horse%20gallops&limit=3")).await;
         assert!(page["hits"][0]["path"].as_str().unwrap().ends_with("Horse__Gallop.bvh.gz"), "{page}");
-        let page: Value = client
-            .get(format!("{base}/v1/search?q=gallop&subject=dog&limit=10"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let page: Value = get_json(&client, format!("{base}/v1/search?q=gallop&subject=dog&limit=10")).await;
         let hits = page["hits"].as_array().unwrap();
         assert!(!hits.is_empty() && hits.iter().all(|h| h["subject"] == "husky dog"), "{page}");
-        let page: Value = client
-            .get(format!("{base}/v1/search?like_clip={walk_id}&limit=1"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let page: Value = get_json(&client, format!("{base}/v1/search?like_clip={walk_id}&limit=1")).await;
         assert_eq!(page["hits"][0]["id"].as_i64().unwrap(), walk_id);
         let form = Form::new().part("like", file(husky.clone(), "w.bvh")).text("limit", "1");
         let page: Value =
@@ -362,8 +338,7 @@ fn rest_and_grpc_serve_every_capability() {
             (Some(1), Some(1)),
             "{job}"
         );
-        let page: Value =
-            client.get(format!("{base}/v1/search?q=prances&limit=5")).send().await.unwrap().json().await.unwrap();
+        let page: Value = get_json(&client, format!("{base}/v1/search?q=prances&limit=5")).await;
         let found = &page["hits"][0];
         assert!(found["path"].as_str().unwrap().ends_with("another.bvh"), "{page}");
         assert_eq!(found["licence"], "CC0-1.0");
@@ -471,7 +446,7 @@ fn a_full_queue_answers_429_and_shutdown_finishes_in_flight_work() {
         // SIGTERM with a generation in flight: it is answered, then the server exits cleanly.
         let in_flight = tokio::spawn(request("20"));
         loop {
-            let health: Value = client.get(format!("{base}/v1/health")).send().await.unwrap().json().await.unwrap();
+            let health: Value = get_json(&client, format!("{base}/v1/health")).await;
             if health["generation_running"] == 1 {
                 break;
             }
@@ -541,7 +516,7 @@ fn sigkill_during_an_upload_ingest_loses_nothing() {
         let id = job["id"].as_i64().unwrap();
         assert_eq!(job["total"].as_i64().unwrap() as usize, count);
         loop {
-            let job: Value = client.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap().json().await.unwrap();
+            let job: Value = get_json(&client, format!("{base}/v1/jobs/{id}")).await;
             let done = job["done"].as_i64().unwrap();
             if done >= 10 {
                 return (id, done as usize);
@@ -619,18 +594,16 @@ fn two_replicas_serve_one_postgres_corpus() {
         // Either replica may run the job; both see it end.
         let job = wait_for_job(&client, &b.base, id).await;
         assert_eq!(job["result"]["added"], 1, "{job}");
-        let on_a: Value = client.get(format!("{}/v1/clips", a.base)).send().await.unwrap().json().await.unwrap();
-        let on_b: Value = client.get(format!("{}/v1/clips", b.base)).send().await.unwrap().json().await.unwrap();
+        let on_a: Value = get_json(&client, format!("{}/v1/clips", a.base)).await;
+        let on_b: Value = get_json(&client, format!("{}/v1/clips", b.base)).await;
         assert_eq!(on_a, on_b);
         assert_eq!(on_b.as_array().unwrap().len(), 1);
         for base in [&a.base, &b.base] {
-            let page: Value =
-                client.get(format!("{base}/v1/search?q=field&limit=1")).send().await.unwrap().json().await.unwrap();
+            let page: Value = get_json(&client, format!("{base}/v1/search?q=field&limit=1")).await;
             assert!(page["hits"][0]["path"].as_str().unwrap().ends_with("Husky__Gallop.bvh.gz"), "{base}: {page}");
         }
         // A skeleton stored through A animates on B, and B's result is readable from A.
-        let skeletons: Value =
-            client.get(format!("{}/v1/skeletons", b.base)).send().await.unwrap().json().await.unwrap();
+        let skeletons: Value = get_json(&client, format!("{}/v1/skeletons", b.base)).await;
         let body = serde_json::json!({ "prompt": "a dog gallops", "seconds": 1, "skeleton_id": skeletons[0]["id"] });
         let response = client.post(format!("{}/v1/generate", b.base)).json(&body).send().await.unwrap();
         assert_eq!(response.status(), 200);
