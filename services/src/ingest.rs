@@ -230,7 +230,7 @@ fn prepare(item: &Item) -> Result<Prepared, String> {
     })
 }
 
-/// The bytes gzip-compressed (fast level: stored blobs are written far more often than read).
+/// The bytes gzip-compressed, at the fast level.
 pub fn gzip(bytes: &[u8]) -> Vec<u8> {
     let mut out = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
     out.write_all(bytes).expect("writing to memory");

@@ -72,7 +72,7 @@ async fn contract(store: &Store, encoder: &mut CachedEncoder, items: &[Item]) {
 /// What the server keeps: results round-trip, and a job is claimed by one replica at a time,
 /// taken over only once its owner stops reporting.
 async fn server_contract(store: &Store) {
-    let samples = [b"first".to_vec(), b"second".to_vec()];
+    let samples = ["first".to_string(), "second".to_string()];
     let request = serde_json::json!({ "prompt": "a dog walks" });
     let new = NewGeneration { kind: "generate", request: request.clone(), frames: 60, fps: 30.0, samples: &samples };
     let id = store.insert_generation(&new).await.unwrap();

@@ -32,6 +32,17 @@ fn refuse(message: impl Into<String>) -> anyhow::Error {
     Refusal(message.into()).into()
 }
 
+/// A user's clip cleaned for the models and at their frame rate, refused with the reason when
+/// it cannot be (the edits, the tokenizer and search by example all read clips this way).
+pub fn cleaned_clip(motion: &Motion) -> Result<CleanClip> {
+    if motion.frames() == 0 {
+        return Err(refuse("the clip has no frames of motion"));
+    }
+    let cleaned =
+        clean(motion, &CleanOptions::default()).map_err(|r| refuse(format!("the clip cannot be used: {r}")))?;
+    Ok(CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned })
+}
+
 /// The frames `seconds` of motion take at the models' frame rate.
 pub fn frames_of(seconds: f64) -> usize {
     (seconds * MODEL_FPS).round() as usize
@@ -102,13 +113,7 @@ impl Studio {
 
     /// A user's clip to edit, with its codes and where it starts.
     pub fn clip(&mut self, motion: &Motion) -> Result<(Target, Codes, [f32; 3])> {
-        if motion.frames() == 0 {
-            return Err(refuse("the clip has no frames of motion"));
-        }
-        let cleaned =
-            clean(motion, &CleanOptions::default()).map_err(|r| refuse(format!("the clip cannot be used: {r}")))?;
-        let cleaned = CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned };
-        let target = self.prepare(motion.clone(), cleaned)?;
+        let target = self.prepare(motion.clone(), cleaned_clip(motion)?)?;
         let encoded = encode_whole(&mut self.tat, &target.graph, &target.cleaned.motion)?;
         let Tokens { codes, start, .. } = encoded.tokens;
         Ok((target, codes.into_iter().next().unwrap_or_default(), start))

@@ -4,10 +4,10 @@
 use super::codecs::Graphs;
 use super::data::MODEL_FPS;
 use super::shipped;
-use super::studio::Refusal;
+use super::studio::{Refusal, cleaned_clip};
 use anyhow::Result;
 use anymo_tokenizer::motion::Motion;
-use anymo_tokenizer::prep::clean::{CleanClip, CleanOptions, clean};
+use anymo_tokenizer::prep::clean::{CleanOptions, clean};
 use anymo_tokenizer::skeleton::Skeleton;
 use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
@@ -32,16 +32,6 @@ pub struct TokenCodec {
     name: String,
     steps: u64,
     encoder: CachedEncoder,
-}
-
-/// A clip cleaned and at the models' frame rate.
-fn cleaned_clip(motion: &Motion) -> Result<CleanClip> {
-    if motion.frames() == 0 {
-        return Err(Refusal("the clip has no frames of motion".into()).into());
-    }
-    let cleaned =
-        clean(motion, &CleanOptions::default()).map_err(|r| Refusal(format!("the clip cannot be used: {r}")))?;
-    Ok(CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned })
 }
 
 impl TokenCodec {

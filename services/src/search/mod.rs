@@ -6,15 +6,13 @@
 pub mod evaluate;
 
 use crate::models::codecs::Graphs;
-use crate::models::data::MODEL_FPS;
-use crate::models::studio::Refusal;
+use crate::models::studio::{Refusal, cleaned_clip};
 use crate::models::{generation, shipped};
 use crate::store::{IndexRecord, Store};
 use anyhow::{Context, Result};
 use anymo_generator::Evaluator;
 use anymo_retrieval::{ClipDocument, Entry, Filter, Library, Query, Space, Spaces, Weights};
 use anymo_tokenizer::motion::Motion;
-use anymo_tokenizer::prep::clean::{CleanOptions, clean};
 use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::encode_whole;
 use anymo_tokenizer::text::{CachedEncoder, SentenceEncoder};
@@ -93,9 +91,7 @@ impl SearchModels {
     /// A clip's motion embedding: cleaned and resampled as for the models, then
     /// [`SearchModels::embed_cleaned`].
     pub fn motion_vector(&mut self, motion: &Motion) -> Result<Vec<f32>> {
-        let cleaned =
-            clean(motion, &CleanOptions::default()).map_err(|r| Refusal(format!("the clip cannot be used: {r}")))?;
-        self.embed_cleaned(&cleaned.motion.resample(MODEL_FPS))
+        self.embed_cleaned(&cleaned_clip(motion)?.motion)
     }
 
     /// The motion embedding of a clip already cleaned and at the models' frame rate: encoded

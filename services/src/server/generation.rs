@@ -132,10 +132,9 @@ async fn keep(
     let samples: Vec<String> = motions.iter().map(bvh_text).collect();
     let frames = motions.first().map_or(0, Motion::frames);
     let fps = motions.first().map_or(MODEL_FPS, Motion::fps);
-    let bytes: Vec<Vec<u8>> = samples.iter().map(|s| s.clone().into_bytes()).collect();
     let id = state
         .store
-        .insert_generation(&NewGeneration { kind, request, frames: frames as i64, fps, samples: &bytes })
+        .insert_generation(&NewGeneration { kind, request, frames: frames as i64, fps, samples: &samples })
         .await?;
     state.metrics.generated(kind, motions.len());
     Ok(Generated { id, frames, fps, samples })

@@ -389,25 +389,8 @@ impl Store {
 
     /// Every skeleton with its clip count.
     pub async fn skeletons(&self) -> Result<Vec<SkeletonRow>, StoreError> {
-        let rows = sqlx::query(
-            "SELECT s.id, s.fingerprint, s.joint_count, s.labels, s.hierarchy, \
-             (SELECT COUNT(*) FROM clips c WHERE c.skeleton_id = s.id) FROM skeletons s ORDER BY s.id",
-        )
-        .fetch_all(&self.pool)
-        .await?;
-        rows.iter()
-            .map(|r| {
-                let labels: String = r.try_get(3)?;
-                Ok(SkeletonRow {
-                    id: r.try_get(0)?,
-                    fingerprint: r.try_get(1)?,
-                    joint_count: r.try_get(2)?,
-                    labels: serde_json::from_str(&labels).map_err(|e| StoreError::Corrupt(e.to_string()))?,
-                    hierarchy: r.try_get(4)?,
-                    clips: r.try_get(5)?,
-                })
-            })
-            .collect()
+        let sql = format!("{SKELETON_SELECT} ORDER BY s.id");
+        sqlx::query(sqlx::AssertSqlSafe(sql)).fetch_all(&self.pool).await?.iter().map(skeleton_row).collect()
     }
 
     /// One clip's record and captions.
@@ -502,7 +485,9 @@ impl Store {
 
     /// One skeleton by id.
     pub async fn skeleton(&self, id: i64) -> Result<Option<SkeletonRow>, StoreError> {
-        Ok(self.skeletons().await?.into_iter().find(|s| s.id == id))
+        let sql = format!("{SKELETON_SELECT} WHERE s.id = $1");
+        let row = sqlx::query(sqlx::AssertSqlSafe(sql)).bind(id).fetch_optional(&self.pool).await?;
+        row.as_ref().map(skeleton_row).transpose()
     }
 
     /// Deletes a clip and its captions; false when there was no such clip.
@@ -578,6 +563,22 @@ impl Store {
         out.sort();
         Ok(out)
     }
+}
+
+/// The columns of a [`SkeletonRow`], with its clip count.
+const SKELETON_SELECT: &str = "SELECT s.id, s.fingerprint, s.joint_count, s.labels, s.hierarchy, \
+     (SELECT COUNT(*) FROM clips c WHERE c.skeleton_id = s.id) FROM skeletons s";
+
+fn skeleton_row(r: &AnyRow) -> Result<SkeletonRow, StoreError> {
+    let labels: String = r.try_get(3)?;
+    Ok(SkeletonRow {
+        id: r.try_get(0)?,
+        fingerprint: r.try_get(1)?,
+        joint_count: r.try_get(2)?,
+        labels: serde_json::from_str(&labels).map_err(|e| StoreError::Corrupt(e.to_string()))?,
+        hierarchy: r.try_get(4)?,
+        clips: r.try_get(5)?,
+    })
 }
 
 /// The bytes of a stored gzip blob.

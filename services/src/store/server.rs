@@ -17,7 +17,7 @@ pub struct NewGeneration<'a> {
     /// Frames per second.
     pub fps: f64,
     /// Each sample's BVH text.
-    pub samples: &'a [Vec<u8>],
+    pub samples: &'a [String],
 }
 
 /// A stored result (without its samples' bytes).
@@ -151,7 +151,7 @@ impl Store {
             sqlx::query("INSERT INTO generation_samples (generation_id, position, bvh_gz) VALUES ($1, $2, $3)")
                 .bind(id)
                 .bind(position as i64)
-                .bind(crate::ingest::gzip(bvh))
+                .bind(crate::ingest::gzip(bvh.as_bytes()))
                 .execute(&mut *tx)
                 .await?;
         }
