@@ -112,6 +112,10 @@ pub struct SkeletonRow {
     pub hierarchy: String,
     /// Clips on this skeleton.
     pub clips: i64,
+    /// The sources of its clips, sorted.
+    pub sources: Vec<String>,
+    /// The subjects of its clips, sorted.
+    pub subjects: Vec<String>,
 }
 
 /// A stored clip (without its bytes).
@@ -390,7 +394,22 @@ impl Store {
     /// Every skeleton with its clip count.
     pub async fn skeletons(&self) -> Result<Vec<SkeletonRow>, StoreError> {
         let sql = format!("{SKELETON_SELECT} ORDER BY s.id");
-        sqlx::query(sqlx::AssertSqlSafe(sql)).fetch_all(&self.pool).await?.iter().map(skeleton_row).collect()
+        let mut rows: Vec<SkeletonRow> = sqlx::query(sqlx::AssertSqlSafe(sql))
+            .fetch_all(&self.pool)
+            .await?
+            .iter()
+            .map(skeleton_row)
+            .collect::<Result<_, _>>()?;
+        let kinds = sqlx::query("SELECT DISTINCT skeleton_id, source, subject FROM clips ORDER BY source, subject")
+            .fetch_all(&self.pool)
+            .await?;
+        for k in &kinds {
+            let id: i64 = k.try_get(0)?;
+            if let Some(row) = rows.iter_mut().find(|r| r.id == id) {
+                add_kind(row, k.try_get(1)?, k.try_get(2)?);
+            }
+        }
+        Ok(rows)
     }
 
     /// One clip's record and captions.
@@ -487,7 +506,16 @@ impl Store {
     pub async fn skeleton(&self, id: i64) -> Result<Option<SkeletonRow>, StoreError> {
         let sql = format!("{SKELETON_SELECT} WHERE s.id = $1");
         let row = sqlx::query(sqlx::AssertSqlSafe(sql)).bind(id).fetch_optional(&self.pool).await?;
-        row.as_ref().map(skeleton_row).transpose()
+        let Some(mut row) = row.as_ref().map(skeleton_row).transpose()? else { return Ok(None) };
+        let kinds =
+            sqlx::query("SELECT DISTINCT source, subject FROM clips WHERE skeleton_id = $1 ORDER BY source, subject")
+                .bind(id)
+                .fetch_all(&self.pool)
+                .await?;
+        for k in &kinds {
+            add_kind(&mut row, k.try_get(0)?, k.try_get(1)?);
+        }
+        Ok(Some(row))
     }
 
     /// Deletes a clip and its captions; false when there was no such clip.
@@ -569,6 +597,16 @@ impl Store {
 const SKELETON_SELECT: &str = "SELECT s.id, s.fingerprint, s.joint_count, s.labels, s.hierarchy, \
      (SELECT COUNT(*) FROM clips c WHERE c.skeleton_id = s.id) FROM skeletons s";
 
+/// Notes one (source, subject) of a skeleton's clips, keeping both lists sorted and distinct.
+fn add_kind(row: &mut SkeletonRow, source: String, subject: String) {
+    if let Err(at) = row.sources.binary_search(&source) {
+        row.sources.insert(at, source);
+    }
+    if let Err(at) = row.subjects.binary_search(&subject) {
+        row.subjects.insert(at, subject);
+    }
+}
+
 fn skeleton_row(r: &AnyRow) -> Result<SkeletonRow, StoreError> {
     let labels: String = r.try_get(3)?;
     Ok(SkeletonRow {
@@ -578,6 +616,8 @@ fn skeleton_row(r: &AnyRow) -> Result<SkeletonRow, StoreError> {
         labels: serde_json::from_str(&labels).map_err(|e| StoreError::Corrupt(e.to_string()))?,
         hierarchy: r.try_get(4)?,
         clips: r.try_get(5)?,
+        sources: Vec::new(),
+        subjects: Vec::new(),
     })
 }
 

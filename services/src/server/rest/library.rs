@@ -101,6 +101,10 @@ pub struct SkeletonView {
     pub clips: i64,
     /// Each joint's semantic label.
     pub labels: Vec<String>,
+    /// The sources of its clips.
+    pub sources: Vec<String>,
+    /// The subjects of its clips (`person`, `horse`, ...).
+    pub subjects: Vec<String>,
     /// Where its skeleton-only BVH is.
     pub bvh_url: String,
 }
@@ -114,6 +118,8 @@ impl From<SkeletonRow> for SkeletonView {
             joints: s.joint_count,
             clips: s.clips,
             labels: s.labels,
+            sources: s.sources,
+            subjects: s.subjects,
         }
     }
 }

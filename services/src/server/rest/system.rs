@@ -24,6 +24,23 @@ pub struct Health {
     pub generation_waiting: usize,
     /// Requests waiting for the search worker.
     pub search_waiting: usize,
+    /// What one request may ask (so a client can offer only what will be accepted).
+    pub limits: LimitsView,
+}
+
+/// The limits a client sees.
+#[derive(Serialize, ToSchema)]
+pub struct LimitsView {
+    /// Longest motion to generate, in seconds.
+    pub seconds: f64,
+    /// Most samples one generation may draw.
+    pub samples: usize,
+    /// Largest request body, in bytes.
+    pub body_bytes: usize,
+    /// Most joints a skeleton may have.
+    pub joints: usize,
+    /// Most frames an uploaded clip may have.
+    pub frames: usize,
 }
 
 /// The server is up and its store answers.
@@ -40,6 +57,13 @@ pub async fn health(State(state): State<Arc<AppState>>) -> Result<axum::Json<Hea
         generation_running: state.generation.active(),
         generation_waiting: state.generation.waiting(),
         search_waiting: state.search.waiting(),
+        limits: LimitsView {
+            seconds: state.limits.seconds,
+            samples: state.limits.samples,
+            body_bytes: state.limits.body_bytes,
+            joints: state.limits.joints,
+            frames: state.limits.frames,
+        },
     }))
 }
 
