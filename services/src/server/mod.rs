@@ -14,6 +14,7 @@ pub mod metrics;
 pub mod motion;
 pub mod rest;
 pub mod search;
+pub mod web;
 
 use crate::models::studio::Studio;
 use crate::models::tokens::TokenCodec;
@@ -206,8 +207,8 @@ impl Server {
     }
 }
 
-/// The REST and gRPC routes on one router, with the docs page, a JSON 404 for anything else,
-/// and the timeout and metrics around every request.
+/// The REST and gRPC routes on one router, with the web page and the docs page, a JSON 404 for
+/// anything else, and the timeout and metrics around every request.
 fn app(state: Arc<AppState>) -> Result<axum::Router> {
     let (rest, api) = rest::router(state.clone());
     let reflection = tonic_reflection::server::Builder::configure()
@@ -218,6 +219,7 @@ fn app(state: Arc<AppState>) -> Result<axum::Router> {
     Ok(rest
         .merge(grpc)
         .merge(docs)
+        .merge(web::router())
         .fallback(rest::fallback)
         .layer(axum::middleware::from_fn_with_state(state, rest::observe)))
 }

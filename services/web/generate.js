@@ -1,0 +1,62 @@
+// The generate view: a prompt, a skeleton, seconds / samples / seed; every sample plays.
+
+import { postForm, showError } from './api.js';
+import { skeletonPicker } from './skeletons.js';
+import { Viewer } from './viewer.js';
+
+/** Wires the generate form to `/v1/generate`, within the server's limits. */
+export function setUpGenerate(skeletons, limits) {
+  const form = document.getElementById('generate-form');
+  const error = form.querySelector('.error');
+  const status = form.querySelector('.status');
+  const button = document.getElementById('generate-button');
+  const results = document.getElementById('generate-results');
+  const seconds = document.getElementById('seconds');
+  const samples = document.getElementById('samples');
+  seconds.max = String(limits.seconds);
+  samples.max = String(limits.samples);
+  const picker = skeletonPicker(document.getElementById('generate-skeleton'), skeletons, 'generate');
+  let viewers = [];
+
+  form.addEventListener('submit', async (event) => {
+    event.preventDefault();
+    showError(error, null);
+    const body = new FormData();
+    try {
+      const prompt = form.prompt.value.trim();
+      if (!prompt) throw new Error('Write a prompt: what should the skeleton do?');
+      body.append('prompt', prompt);
+      for (const field of [seconds, samples, form.seed]) {
+        if (field.value === '') continue;
+        if (!field.checkValidity()) throw new Error(`${field.labels[0].textContent.trim()}: ${field.validationMessage}`);
+        body.append(field.name, field.value);
+      }
+      picker.addTo(body);
+    } catch (e) {
+      showError(error, e);
+      return;
+    }
+    button.disabled = true;
+    form.setAttribute('aria-busy', 'true');
+    status.textContent = 'Generating…';
+    const started = performance.now();
+    try {
+      const answer = await postForm('/v1/generate', body);
+      for (const v of viewers) v.remove();
+      const who = picker.label();
+      viewers = answer.map((s) => new Viewer(results, s.bvh, {
+        title: `Sample ${s.index + 1} on ${who}`,
+        download: s.url,
+        filename: `anymo-${s.generation_id}-${s.index + 1}.bvh`,
+      }));
+      const took = ((performance.now() - started) / 1000).toFixed(1);
+      status.textContent = `${answer.length} sample${answer.length === 1 ? '' : 's'} of ${answer[0].frames} frames at ${answer[0].fps} fps, in ${took} s (result ${answer[0].generation_id}).`;
+    } catch (e) {
+      status.textContent = '';
+      showError(error, e);
+    } finally {
+      button.disabled = false;
+      form.removeAttribute('aria-busy');
+    }
+  });
+}
