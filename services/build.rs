@@ -21,6 +21,7 @@ const OWN: &[&str] = &[
     "app.js",
     "api.js",
     "viewer.js",
+    "dom.js",
     "skeletons.js",
     "generate.js",
     "library.js",

@@ -1,15 +1,13 @@
 // The generate view: a prompt, a skeleton, seconds / samples / seed; every sample plays.
 
-import { postForm, showError } from './api.js';
+import { postForm } from './api.js';
+import { onSubmit } from './dom.js';
 import { skeletonPicker } from './skeletons.js';
 import { Viewer } from './viewer.js';
 
 /** Wires the generate form to `/v1/generate`, within the server's limits. */
 export function setUpGenerate(skeletons, limits) {
   const form = document.getElementById('generate-form');
-  const error = form.querySelector('.error');
-  const status = form.querySelector('.status');
-  const button = document.getElementById('generate-button');
   const results = document.getElementById('generate-results');
   const seconds = document.getElementById('seconds');
   const samples = document.getElementById('samples');
@@ -18,11 +16,10 @@ export function setUpGenerate(skeletons, limits) {
   const picker = skeletonPicker(document.getElementById('generate-skeleton'), skeletons, 'generate');
   let viewers = [];
 
-  form.addEventListener('submit', async (event) => {
-    event.preventDefault();
-    showError(error, null);
-    const body = new FormData();
-    try {
+  onSubmit(form, {
+    busy: 'Generating…',
+    build() {
+      const body = new FormData();
       const prompt = form.prompt.value.trim();
       if (!prompt) throw new Error('Write a prompt: what should the skeleton do?');
       body.append('prompt', prompt);
@@ -32,15 +29,10 @@ export function setUpGenerate(skeletons, limits) {
         body.append(field.name, field.value);
       }
       picker.addTo(body);
-    } catch (e) {
-      showError(error, e);
-      return;
-    }
-    button.disabled = true;
-    form.setAttribute('aria-busy', 'true');
-    status.textContent = 'Generating…';
-    const started = performance.now();
-    try {
+      return body;
+    },
+    async send(body) {
+      const started = performance.now();
       const answer = await postForm('/v1/generate', body);
       for (const v of viewers) v.remove();
       const who = picker.label();
@@ -50,13 +42,9 @@ export function setUpGenerate(skeletons, limits) {
         filename: `anymo-${s.generation_id}-${s.index + 1}.bvh`,
       }));
       const took = ((performance.now() - started) / 1000).toFixed(1);
-      status.textContent = `${answer.length} sample${answer.length === 1 ? '' : 's'} of ${answer[0].frames} frames at ${answer[0].fps} fps, in ${took} s (result ${answer[0].generation_id}).`;
-    } catch (e) {
-      status.textContent = '';
-      showError(error, e);
-    } finally {
-      button.disabled = false;
-      form.removeAttribute('aria-busy');
-    }
+      const [first] = answer;
+      return `${answer.length} sample${answer.length === 1 ? '' : 's'} of ${first.frames} frames at ${first.fps} fps, `
+        + `in ${took} s (result ${first.generation_id}).`;
+    },
   });
 }

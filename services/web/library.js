@@ -2,16 +2,11 @@
 // clip's captions, licence and skeleton tree, and "find similar" from any clip.
 
 import { getJson, getText, query, showError } from './api.js';
+import { element } from './dom.js';
 import { Viewer, jointTree } from './viewer.js';
 
 const PAGE = 12;
 
-function element(tag, attributes = {}, text) {
-  const e = document.createElement(tag);
-  for (const [k, v] of Object.entries(attributes)) e.setAttribute(k, v);
-  if (text !== undefined) e.textContent = text;
-  return e;
-}
 
 /** A caption with the matched spans marked (`highlights` are character ranges). */
 function marked(caption, highlights) {
@@ -131,8 +126,10 @@ export function setUpLibrary(stats, onTransfer) {
       play.disabled = true;
       try {
         const text = await getText(`/v1/clips/${item.id}/bvh`);
-        previews.push(new Viewer(stage, text, { title: `Clip ${item.id}`, download: `/v1/clips/${item.id}/bvh`, filename: `clip-${item.id}.bvh` }));
+        const viewer = new Viewer(stage, text, { title: `Clip ${item.id}`, download: `/v1/clips/${item.id}/bvh`, filename: `clip-${item.id}.bvh` });
+        previews.push(viewer);
         play.remove();
+        viewer.focus();
       } catch (e) {
         play.disabled = false;
         stage.replaceChildren(element('p', { class: 'error', role: 'alert' }, e.message));

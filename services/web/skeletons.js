@@ -1,6 +1,8 @@
 // Choosing a skeleton: one of the library's, or a BVH file of the user's own. Generation and
 // transfer both ask for one the same way.
 
+import { element } from './dom.js';
+
 /** A readable name for a stored skeleton: what is on it, how many joints, how many clips. */
 export function skeletonName(s) {
   const subjects = s.subjects.length ? s.subjects.join(', ') : 'no clips';
@@ -25,12 +27,7 @@ export function skeletonPicker(fieldset, skeletons, prefix) {
   const file = fieldset.querySelector(`#${prefix}-skeleton-file`);
   const upload = fieldset.querySelector(`#${prefix}-upload`);
   const stored = fieldset.querySelector(`#${prefix}-stored`);
-  for (const s of skeletons) {
-    const option = document.createElement('option');
-    option.value = String(s.id);
-    option.textContent = skeletonName(s);
-    select.append(option);
-  }
+  for (const s of skeletons) select.append(element('option', { value: String(s.id) }, skeletonName(s)));
   if (!skeletons.length) {
     stored.disabled = true;
     select.disabled = true;

@@ -2,15 +2,11 @@
 // playing side by side in step.
 
 import { getJson, getText, postForm, query, showError } from './api.js';
+import { element, onSubmit } from './dom.js';
 import { skeletonPicker } from './skeletons.js';
 import { Viewer } from './viewer.js';
 
-function option(value, text) {
-  const o = document.createElement('option');
-  o.value = String(value);
-  o.textContent = text;
-  return o;
-}
+const option = (value, text) => element('option', { value: String(value) }, text);
 
 const clipLabel = (c) => `${c.caption ?? c.captions?.[0] ?? c.path} · ${c.subject} · clip ${c.id}`;
 
@@ -19,7 +15,6 @@ export function setUpTransfer(skeletons) {
   const form = document.getElementById('transfer-form');
   const error = form.querySelector('.error');
   const status = form.querySelector('.status');
-  const button = document.getElementById('transfer-button');
   const clipSelect = document.getElementById('transfer-clip');
   const find = document.getElementById('transfer-find');
   const results = document.getElementById('transfer-results');
@@ -51,41 +46,30 @@ export function setUpTransfer(skeletons) {
     }
   });
 
-  form.addEventListener('submit', async (event) => {
-    event.preventDefault();
-    showError(error, null);
-    const body = new FormData();
-    const clipId = clipSelect.value;
-    try {
-      if (!clipId) throw new Error('Choose the clip to move: find one above.');
-      body.append('clip_id', clipId);
+  onSubmit(form, {
+    busy: 'Transferring…',
+    build() {
+      const body = new FormData();
+      if (!clipSelect.value) throw new Error('Choose the clip to move: find one above.');
+      body.append('clip_id', clipSelect.value);
       picker.addTo(body);
-    } catch (e) {
-      showError(error, e);
-      return;
-    }
-    button.disabled = true;
-    form.setAttribute('aria-busy', 'true');
-    status.textContent = 'Transferring…';
-    try {
+      return body;
+    },
+    async send(body) {
+      const clipId = body.get('clip_id');
       const [answer, source] = await Promise.all([postForm('/v1/transfer', body), getText(`/v1/clips/${clipId}/bvh`)]);
       for (const v of viewers) v.remove();
       const target = picker.label();
+      const [result] = answer;
       viewers = [
         new Viewer(results, source, { title: `Clip ${clipId} (source)`, download: `/v1/clips/${clipId}/bvh`, filename: `clip-${clipId}.bvh` }),
-        new Viewer(results, answer[0].bvh, {
-          title: `Clip ${clipId} on ${target}`, download: answer[0].url, filename: `anymo-transfer-${answer[0].generation_id}.bvh`,
+        new Viewer(results, result.bvh, {
+          title: `Clip ${clipId} on ${target}`, download: result.url, filename: `anymo-transfer-${result.generation_id}.bvh`,
         }),
       ];
       for (const v of viewers) v.restart();
-      status.textContent = `Moved clip ${clipId} onto ${target}: ${answer[0].frames} frames (result ${answer[0].generation_id}).`;
-    } catch (e) {
-      status.textContent = '';
-      showError(error, e);
-    } finally {
-      button.disabled = false;
-      form.removeAttribute('aria-busy');
-    }
+      return `Moved clip ${clipId} onto ${target}: ${result.frames} frames (result ${result.generation_id}).`;
+    },
   });
 
   return {

@@ -6,6 +6,7 @@
 import * as THREE from './vendor/three.module.js';
 import { BVHLoader } from './vendor/BVHLoader.js';
 import { OrbitControls } from './vendor/OrbitControls.js';
+import { element } from './dom.js';
 
 const LIVE_LIMIT = 8;
 const SPEEDS = [0.25, 0.5, 1, 1.5, 2];
@@ -28,12 +29,6 @@ export function jointTree(bone) {
   };
 }
 
-function element(tag, attributes = {}, text) {
-  const e = document.createElement(tag);
-  for (const [k, v] of Object.entries(attributes)) e.setAttribute(k, v);
-  if (text !== undefined) e.textContent = text;
-  return e;
-}
 
 /** Plays one BVH clip in a figure appended to `container`. */
 export class Viewer {
@@ -149,8 +144,13 @@ export class Viewer {
     this.renderer.forceContextLoss();
     this.renderer = null;
     const wake = element('button', { type: 'button', class: 'wake' }, `Show ${this.title} again`);
-    wake.addEventListener('click', () => { this.wake(); this.renderer?.domElement.focus(); });
+    wake.addEventListener('click', () => { this.wake(); this.focus(); });
     this.stage.replaceChildren(wake);
+  }
+
+  /** Moves the keyboard focus to the player (its canvas, or its play button without WebGL). */
+  focus() {
+    (this.renderer?.domElement ?? this.playButton).focus();
   }
 
   /** Stops drawing and removes the player. */
