@@ -138,3 +138,17 @@ pub fn wait_for_saved_step(state: &Path, step: u64) {
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }
+
+/// Whether a tool an end-to-end test needs (as `bash tools/setup.sh --test-tools` installs it)
+/// is at `path`. Where it is not, the test should skip, and this says so; but with
+/// `ANYMO_REQUIRE_TEST_TOOLS` set (as `.ci/run` sets it) a missing tool fails the test instead,
+/// so CI never passes a test it did not run.
+pub fn test_tool(path: &Path, what: &str) -> bool {
+    if path.exists() {
+        return true;
+    }
+    let how = format!("no {what} at {} (bash tools/setup.sh --test-tools)", path.display());
+    assert!(std::env::var_os("ANYMO_REQUIRE_TEST_TOOLS").is_none(), "{how}, and ANYMO_REQUIRE_TEST_TOOLS is set");
+    eprintln!("skipping: {how}");
+    false
+}

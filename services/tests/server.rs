@@ -4,56 +4,17 @@
 //! graceful shutdown with a request in flight, a SIGKILL during an upload ingest, and two
 //! replicas on one PostgreSQL.
 
-use anymo_tests::{data_dir, manifest, models_dir, scratch_dir, succeeded};
+mod common;
+
+use anymo_tests::{data_dir, models_dir, scratch_dir, succeeded, test_tool};
 use anymo_tokenizer::bvh;
+use common::{KEY, anymo, library, serve};
 use reqwest::multipart::{Form, Part};
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-const KEY: &str = "test-key-1";
-
-/// A running `anymo serve`, killed when dropped.
-struct Served {
-    child: Child,
-    base: String,
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn anymo(data: &Path, models: &Path, args: &[&str]) -> Command {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_anymo"));
-    command.args(args).arg("--data-dir").arg(data).env("ANYMO_MODELS", models);
-    command.env_remove("DATABASE_URL").env_remove("ANYMO_API_KEYS");
-    command
-}
-
-/// Starts a server on a free port and waits for the line that gives its address.
-fn serve(data: &Path, models: &Path, extra: &[&str], env: &[(&str, &str)]) -> Served {
-    let mut command = anymo(data, models, &["serve", "--addr", "127.0.0.1:0", "--api-key", KEY]);
-    command.args(extra);
-    for (k, v) in env {
-        command.env(k, v);
-    }
-    let mut child = command.stdout(Stdio::piped()).stderr(Stdio::inherit()).spawn().expect("anymo serve starts");
-    let stdout = child.stdout.take().expect("piped stdout");
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx.recv_timeout(Duration::from_secs(300)).expect("the server says where it listens");
-    let base = line.split_whitespace().find(|w| w.starts_with("http://")).expect("an address").to_string();
-    Served { child, base }
-}
 
 fn runtime() -> tokio::runtime::Runtime {
     tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap()
@@ -86,16 +47,6 @@ async fn refused(response: reqwest::Response, status: u16, code: &str, says: &st
     assert_eq!(body["error"]["code"], code, "{body}");
     let message = body["error"]["message"].as_str().unwrap();
     assert!(message.contains(says), "{message:?} should say {says:?}");
-}
-
-/// The library the tests serve: horses, huskies and two kinds of Bandai motion.
-fn library(shared: &Path, scratch: &Path) -> PathBuf {
-    manifest(shared, scratch, &|p| {
-        p.contains("/Horse__")
-            || p.contains("/Husky__")
-            || p.contains("dataset-1_walk_normal")
-            || p.contains("dataset-1_bow_angry")
-    })
 }
 
 /// The JSON answer of a GET.
@@ -632,8 +583,7 @@ fn schemathesis_finds_no_server_error() {
         || Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/schemathesis/bin/schemathesis"),
         PathBuf::from,
     );
-    if !program.is_file() {
-        eprintln!("skipping: no schemathesis at {} (bash tools/setup.sh --test-tools)", program.display());
+    if !test_tool(&program, "schemathesis") {
         return;
     }
     let seconds = std::env::var("ANYMO_SCHEMATHESIS_SECONDS").unwrap_or_else(|_| "60".into());
