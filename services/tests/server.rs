@@ -11,9 +11,9 @@ use anymo_tokenizer::bvh;
 use common::{KEY, anymo, library, serve};
 use reqwest::multipart::{Form, Part};
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 fn runtime() -> tokio::runtime::Runtime {

@@ -57,6 +57,23 @@ async fn contract(store: &Store, encoder: &mut CachedEncoder, items: &[Item]) {
     let skeletons = store.skeletons().await.unwrap();
     assert_eq!(skeletons.iter().map(|s| s.clips).sum::<i64>(), stats.clips);
     assert!(skeletons.iter().all(|s| s.labels.len() as i64 == s.joint_count));
+    // Each skeleton names what is on it: the distinct sources and subjects of its clips, sorted,
+    // which together cover the corpus's; one skeleton alone says the same.
+    for s in &skeletons {
+        assert!(!s.sources.is_empty() && !s.subjects.is_empty(), "skeleton {} has clips", s.id);
+        assert!(s.sources.windows(2).all(|w| w[0] < w[1]) && s.subjects.windows(2).all(|w| w[0] < w[1]));
+        let alone = store.skeleton(s.id).await.unwrap().expect("the skeleton");
+        assert_eq!((&alone.sources, &alone.subjects), (&s.sources, &s.subjects));
+    }
+    let sources: Vec<&String> = skeletons.iter().flat_map(|s| &s.sources).collect();
+    let subjects: Vec<&String> = skeletons.iter().flat_map(|s| &s.subjects).collect();
+    for (group, mut seen) in [("source", sources), ("subject", subjects)] {
+        seen.sort();
+        seen.dedup();
+        let mut grouped: Vec<&String> = stats.groups.iter().filter(|g| g.0 == group).map(|g| &g.1).collect();
+        grouped.sort();
+        assert_eq!(seen, grouped, "{group}");
+    }
     for id in 1..=3 {
         let clip = store.clip(id).await.unwrap().expect("stored clip");
         let item = items.iter().find(|i| i.key == clip.source_path).expect("an ingested item");
