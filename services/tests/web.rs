@@ -1,7 +1,7 @@
 //! The web page, served by `anymo serve` on a small real library: its files come from the binary
 //! (gzip, ETags, a content security policy, nothing from elsewhere), and in headless Chromium
 //! (`tests/e2e/page.mjs`, with playwright-core) a user generates on an uploaded skeleton and
-//! sees it play, meets an API error in place, searches, previews, opens a clip, finds similar
+//! sees it play, meets an API error in place, searches with and without a filter, previews, opens a clip, finds similar
 //! clips and transfers one. Screenshots are kept in `target/e2e-screenshots`.
 
 mod common;

@@ -212,6 +212,18 @@ try {
   report.firstHit = await hits.first().locator('h4').textContent();
   check(report.hits > 0, 'the search found nothing');
 
+  step = 'filtering the search';
+  const subject = await page.locator('#filter-subject option').evaluateAll(
+    (options) => options.map((o) => o.value).find((v) => v && !v.includes('horse')));
+  await page.selectOption('#filter-subject', subject);
+  await page.waitForFunction((s) => {
+    const metas = [...document.querySelectorAll('#results .hit .meta')].map((m) => m.textContent);
+    return metas.length > 0 && metas.every((m) => m.startsWith(`${s} ·`));
+  }, subject);
+  report.filtered = { subject, hits: await hits.count() };
+  await page.selectOption('#filter-subject', '');
+  await page.waitForFunction(() => document.querySelector('#results .hit .meta')?.textContent.startsWith('horse ·'));
+
   step = 'playing a preview';
   await hits.first().locator('button.preview-button').click();
   await plays(hits.first().locator('.viewer'), 'library-preview');
