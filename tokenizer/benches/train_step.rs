@@ -86,20 +86,28 @@ fn main() {
     };
     let mut optimiser = AdamW::new(tat.params(), AdamWConfig::default()).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    let mut step = |tat: &mut Tat| {
+    // Seconds spent in the forward pass (with the loss), the backward pass and the optimiser.
+    let mut phases = [0f64; 3];
+    let mut step = |tat: &mut Tat, phases: &mut [f64; 3]| {
+        let t = Instant::now();
         let prepared = Prepared::new(&batch, &stats).unwrap();
         let out = tat.reconstruct(&prepared, &graph, true, &mut rng).unwrap();
         let (total, _) =
             loss(&out.prediction, &prepared, &stats, &out.commitment, &tat.config().weights.clone()).unwrap();
+        phases[0] += t.elapsed().as_secs_f64();
+        let t = Instant::now();
         let grads = total.backward().unwrap();
+        phases[1] += t.elapsed().as_secs_f64();
+        let t = Instant::now();
         optimiser.step(tat.params(), &grads, 1e-4).unwrap();
+        phases[2] += t.elapsed().as_secs_f64();
     };
-    step(&mut tat);
+    step(&mut tat, &mut [0.0; 3]);
     flops::take();
     let steps = 5;
     let t = Instant::now();
     for _ in 0..steps {
-        step(&mut tat);
+        step(&mut tat, &mut phases);
     }
     let seconds = t.elapsed().as_secs_f64() / steps as f64;
     let step_flops = 3.0 * flops::take() as f64 / steps as f64;
@@ -107,6 +115,8 @@ fn main() {
     let reference = matmul_rate();
     println!("threads: {threads}; batch: 16 windows x 64 frames x {joints} joints; TAT default configuration");
     println!("training step: {:.3} s, {:.2} GFLOP (matmuls, forward + backward)", seconds, step_flops / 1e9);
+    let [forward, backward, optimiser] = phases.map(|p| p / steps as f64);
+    println!("  forward and loss {forward:.3} s, backward {backward:.3} s, optimiser {optimiser:.3} s");
     println!("achieved: {:.1} GFLOP/s", step_rate / 1e9);
     println!("dense 1024x1024 f32 matmul, same run: {:.1} GFLOP/s", reference / 1e9);
     println!("ratio: {:.1}% of the machine's matmul rate (goal: 35%)", 100.0 * step_rate / reference);

@@ -1,7 +1,11 @@
 //! Layers with a backward pass for every parameter, shaped for few large matmuls.
 
+use super::bias::add_bias;
+use super::layer_norm::LayerNorm;
 use super::params::Params;
-use candle_core::{D, Result, Tensor};
+use super::relu::relu;
+use super::softmax::softmax_last_dim;
+use candle_core::{Result, Tensor};
 
 /// `y = x W + b` over the last dimension. Inputs of any rank are flattened to one 2-D matmul.
 #[derive(Clone)]
@@ -47,31 +51,11 @@ impl Linear {
         super::flops::record(1, rows, input, self.out);
         let y = x.reshape((rows, input))?.matmul(&self.weight)?;
         let y = match &self.bias {
-            Some(b) => y.broadcast_add(b)?,
+            Some(b) => add_bias(&y, b)?,
             None => y,
         };
         *dims.last_mut().expect("at least one dimension") = self.out;
         y.reshape(dims)
-    }
-}
-
-/// Layer normalisation over the last dimension (candle's fused one has no backward pass).
-#[derive(Clone)]
-pub struct LayerNorm {
-    gain: Tensor,
-    bias: Tensor,
-}
-
-impl LayerNorm {
-    /// A layer norm over `dim` features, starting as the identity normalisation.
-    pub fn new(params: &mut Params, name: &str, dim: usize) -> Result<LayerNorm> {
-        params
-            .scope(name, |p| Ok(LayerNorm { gain: p.constant("g", &[dim], 1.0)?, bias: p.constant("b", &[dim], 0.0)? }))
-    }
-
-    /// Normalises the last dimension.
-    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        candle_nn::ops::layer_norm_slow(x, &self.gain, &self.bias, 1e-5)
     }
 }
 
@@ -122,7 +106,7 @@ impl FeedForward {
         let h = self.up.forward(x)?;
         let h = match self.activation {
             Activation::Gelu => h.gelu()?,
-            Activation::Relu => h.relu()?,
+            Activation::Relu => relu(&h)?,
         };
         self.down.forward(&h)
     }
@@ -164,7 +148,7 @@ impl Attention {
         if let Some(mask) = mask {
             scores = scores.broadcast_add(mask)?;
         }
-        let weights = candle_nn::ops::softmax(&scores, D::Minus1)?;
+        let weights = softmax_last_dim(&scores)?;
         let mixed = weights.matmul(&v)?.reshape((n, self.heads, l, head))?.transpose(1, 2)?.reshape((n, l, dim))?;
         self.out.forward(&mixed)
     }

@@ -2,7 +2,7 @@
 //! with edge updates (eq. 7-12), multi-head.
 
 use super::graph::{GraphBatch, NODE_INPUT_DIM};
-use crate::nn::{FeedForward, LayerNorm, Linear, Params};
+use crate::nn::{FeedForward, LayerNorm, Linear, Params, relu};
 use candle_core::{D, Result, Tensor};
 use serde::{Deserialize, Serialize};
 
@@ -93,7 +93,7 @@ impl Block {
         let messages = values.broadcast_mul(&alpha.unsqueeze(2)?)?.reshape((edges, d))?;
         let gathered = Tensor::zeros((n, d), h.dtype(), h.device())?.index_add(dst, &messages, 0)?;
         // FFN and residual layer norm (eq. 11-12).
-        let h_next = self.node_norm.forward(&(h + self.node_ff.forward(&gathered)?.relu()?)?)?;
+        let h_next = self.node_norm.forward(&(h + relu(&self.node_ff.forward(&gathered)?)?)?)?;
         // Edge update (eq. 10), then the same FFN and norm.
         let e_next = match &self.edge {
             Some(u) => {

@@ -3,7 +3,7 @@
 //! and a decoder that broadcasts the quantised virtual joint to the target skeleton's joints.
 
 use super::temporal::{Downsample, ResBlock, Upsample};
-use crate::nn::{LayerNorm, Linear, Params, TransformerLayer};
+use crate::nn::{LayerNorm, Linear, Params, TransformerLayer, relu, repeat_dim1, repeat_rows};
 use candle_core::{D, Result, Tensor};
 use serde::{Deserialize, Serialize};
 
@@ -77,20 +77,24 @@ impl Modulation {
         })
     }
 
-    /// `x (B, T, J, d)`, `condition (B, J, c)`.
+    /// `x (B, T, J, d)`, `condition (B, J, c)`. The per-window terms are repeated over time
+    /// before they meet `x` (see [`repeat_dim1`]).
     fn forward(&self, x: &Tensor, condition: &Tensor) -> Result<Tensor> {
-        let c = self.condition.forward(condition)?.relu()?;
+        let t = x.dim(1)?;
+        let along_time = |v: &Tensor| repeat_dim1(&v.unsqueeze(1)?, t);
+        let c = relu(&self.condition.forward(condition)?)?;
         match &self.film {
-            None => x.broadcast_add(&c.unsqueeze(1)?),
+            None => x + along_time(&c)?,
             Some(film) => {
                 let d = c.dim(D::Minus1)?;
-                let ss = film.scale_shift.forward(&c)?.unsqueeze(1)?;
-                let (scale, shift) = (ss.narrow(D::Minus1, 0, d)?, ss.narrow(D::Minus1, d, d)?);
+                let ss = film.scale_shift.forward(&c)?;
+                let (scale, shift) =
+                    (along_time(&ss.narrow(D::Minus1, 0, d)?)?, along_time(&ss.narrow(D::Minus1, d, d)?)?);
                 // candle's sigmoid is a custom op with a backward pass (unlike its fused softmax and
                 // layer norm); `tokenizer/tests/training.rs` checks the gate's weights learn.
-                let gate = candle_nn::ops::sigmoid(&film.gate.forward(&c)?)?.unsqueeze(1)?;
-                let modulated = film.norm.forward(x)?.broadcast_mul(&(scale + 1.0)?)?.broadcast_add(&shift)?;
-                x + modulated.broadcast_mul(&gate)?
+                let gate = along_time(&candle_nn::ops::sigmoid(&film.gate.forward(&c)?)?)?;
+                let modulated = ((film.norm.forward(x)? * (scale + 1.0)?)? + shift)?;
+                x + (modulated * gate)?
             }
         }
     }
@@ -185,7 +189,7 @@ impl Encoder {
         let t = t / 2;
         let x = self.modulation.forward(&self.input.forward(&pairs)?, condition)?;
         let d = x.dim(D::Minus1)?;
-        let v = self.virtual_joint.reshape((1, 1, 1, d))?.broadcast_as((b, t, 1, d))?;
+        let v = repeat_rows(&self.virtual_joint, b * t)?.reshape((b, t, 1, d))?;
         let mut x = Tensor::cat(&[&x, &v], 2)?;
         for block in &self.blocks {
             x = temporal(&x, |s| block.res[1].forward(&block.res[0].forward(&block.down.forward(s)?)?))?;
@@ -228,7 +232,8 @@ impl Decoder {
         let z = self.latent.forward(latent)?.unsqueeze(2)?;
         let (b, t, _, d) = z.dims4()?;
         let joints = condition.dim(1)?;
-        let x = self.modulation.forward(&z.broadcast_as((b, t, joints, d))?.contiguous()?, condition)?;
+        let per_joint = repeat_dim1(&z.reshape((b * t, 1, d))?, joints)?.reshape((b, t, joints, d))?;
+        let x = self.modulation.forward(&per_joint, condition)?;
         let mut x = Tensor::cat(&[&x, &z], 2)?;
         for block in &self.blocks {
             x = spatial(&block.spatial, &x)?;

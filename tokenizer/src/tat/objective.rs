@@ -4,6 +4,7 @@
 
 use super::fk::Levels;
 use crate::dataset::Batch;
+use crate::nn::relu;
 use candle_core::{D, Device, Result, Tensor};
 use serde::{Deserialize, Serialize};
 
@@ -210,7 +211,7 @@ pub fn loss(
     let contact = match &prediction.contacts {
         Some(logits) => {
             // Binary cross-entropy with logits: softplus(x) - y x.
-            let softplus = (logits.abs()?.neg()?.exp()? + 1.0)?.log()?.add(&logits.relu()?)?;
+            let softplus = (logits.abs()?.neg()?.exp()? + 1.0)?.log()?.add(&relu(logits)?)?;
             masked_mean(&(softplus - (logits * &truth.contacts)?)?, mask)?
         }
         None => Tensor::new(0f32, &Device::Cpu)?,

@@ -3,7 +3,7 @@
 //! a concatenation of shifted copies plus a linear layer. Candle's conv1d would run many small
 //! im2col products instead.
 
-use crate::nn::{Linear, Params};
+use crate::nn::{Linear, Params, relu};
 use candle_core::{D, Result, Tensor};
 
 /// Halves the frame rate: kernel 2, stride 2.
@@ -67,12 +67,12 @@ impl ResBlock {
     /// Applies the block to `(N, T, d)`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let (n, t, d) = x.dims3()?;
-        let h = x.relu()?;
+        let h = relu(x)?;
         let k = self.dilation.min(t);
         let zeros = Tensor::zeros((n, k, d), x.dtype(), x.device())?;
         let before = Tensor::cat(&[&zeros, &h.narrow(1, 0, t - k)?], 1)?;
         let after = Tensor::cat(&[&h.narrow(1, k, t - k)?, &zeros], 1)?;
-        let y = self.conv.forward(&Tensor::cat(&[&before, &h, &after], D::Minus1)?)?.relu()?;
+        let y = relu(&self.conv.forward(&Tensor::cat(&[&before, &h, &after], D::Minus1)?)?)?;
         x + self.out.forward(&y)?
     }
 }
