@@ -8,7 +8,7 @@ mod common;
 
 use anymo_tests::{data_dir, models_dir, scratch_dir, succeeded, test_tool};
 use anymo_tokenizer::bvh;
-use common::{KEY, anymo, library, serve};
+use common::{KEY, anymo, ingested_library, serve};
 use reqwest::multipart::{Form, Part};
 use serde_json::Value;
 use std::io::Read;
@@ -70,9 +70,7 @@ async fn wait_for_job(client: &reqwest::Client, base: &str, id: i64) -> Value {
 fn rest_and_grpc_serve_every_capability() {
     let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
     let scratch = scratch_dir("server");
-    let data = scratch.join("data");
-    let list = library(&shared, &scratch);
-    succeeded(anymo(&data, &models, &["ingest", list.to_str().unwrap()]).output().unwrap());
+    let data = ingested_library(&shared, &models, &scratch);
     let server = serve(&data, &models, &["--max-body-bytes", "300000"], &[]);
     let base = server.base.clone();
     let husky_path = shared.join("quaternius/bvh/animals_pack/Husky__Walk.bvh.gz");
@@ -588,9 +586,7 @@ fn schemathesis_finds_no_server_error() {
     }
     let seconds = std::env::var("ANYMO_SCHEMATHESIS_SECONDS").unwrap_or_else(|_| "60".into());
     let scratch = scratch_dir("server-schemathesis");
-    let data = scratch.join("data");
-    let list = library(&shared, &scratch);
-    succeeded(anymo(&data, &models, &["ingest", list.to_str().unwrap()]).output().unwrap());
+    let data = ingested_library(&shared, &models, &scratch);
     let server = serve(&data, &models, &[], &[]);
     let out = Command::new(program)
         .args(["run", &format!("{}/openapi.json", server.base), "--checks", "not_a_server_error"])

@@ -6,8 +6,8 @@
 
 mod common;
 
-use anymo_tests::{data_dir, gunzip, models_dir, scratch_dir, succeeded, test_tool};
-use common::{anymo, library, serve};
+use anymo_tests::{data_dir, gunzip, models_dir, scratch_dir, test_tool};
+use common::{ingested_library, serve};
 use serde_json::Value;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -90,9 +90,7 @@ fn files_are_served_from_the_binary(base: &str) {
 fn the_page_generates_plays_searches_and_transfers() {
     let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
     let scratch = scratch_dir("web");
-    let data = scratch.join("data");
-    let list = library(&shared, &scratch);
-    succeeded(anymo(&data, &models, &["ingest", list.to_str().unwrap()]).output().unwrap());
+    let data = ingested_library(&shared, &models, &scratch);
     let server = serve(&data, &models, &[], &[]);
     files_are_served_from_the_binary(&server.base);
 

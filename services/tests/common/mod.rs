@@ -1,7 +1,7 @@
 //! What the tests that run `anymo serve` share: the binary on a free port, killed when dropped,
 //! and the small real library it serves.
 
-use anymo_tests::manifest;
+use anymo_tests::{manifest, succeeded};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -54,11 +54,19 @@ pub fn serve(data: &Path, models: &Path, extra: &[&str], env: &[(&str, &str)]) -
 }
 
 /// The library the tests serve: horses, huskies and two kinds of Bandai motion.
-pub fn library(shared: &Path, scratch: &Path) -> PathBuf {
+fn library(shared: &Path, scratch: &Path) -> PathBuf {
     manifest(shared, scratch, &|p| {
         p.contains("/Horse__")
             || p.contains("/Husky__")
             || p.contains("dataset-1_walk_normal")
             || p.contains("dataset-1_bow_angry")
     })
+}
+
+/// A data folder under `scratch` with [`library`] ingested (and indexed), ready to serve.
+pub fn ingested_library(shared: &Path, models: &Path, scratch: &Path) -> PathBuf {
+    let data = scratch.join("data");
+    let list = library(shared, scratch);
+    succeeded(anymo(&data, models, &["ingest", list.to_str().expect("a UTF-8 path")]).output().expect("anymo runs"));
+    data
 }
