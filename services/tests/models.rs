@@ -1,7 +1,8 @@
 //! The model commands end to end on a small sample of the real corpus: a tiny OwO pretraining,
 //! tokenizer and baseline trainings (one of them killed and resumed, which must end exactly
-//! where an uninterrupted run ends), the evaluation, and tokenize / detokenize / transfer on real
-//! files with the output keeping the target's hierarchy.
+//! where an uninterrupted run ends, and one continued from its shipped checkpoint), the
+//! evaluation, and tokenize / detokenize / transfer on real files with the output keeping the
+//! target's hierarchy.
 
 use anymo_tests::{
     data_dir, gunzip, models_dir, safetensors_values as tensors, scratch_dir, succeeded as ok, wait_for_saved_step,
@@ -81,6 +82,27 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
         assert_eq!(na, nb);
         assert!(va == vb, "{na} differs between the straight and the resumed run");
     }
+
+    // Continuing the shipped checkpoint: it starts at its 6 steps, ends at the new total, and
+    // its card says where it came from. A total it has reached, or other options, are refused.
+    let more = |steps: &str, extra: &[&str]| {
+        let base = with(vec!["train".into(), "tokenizer".into()], &strs(&common("straight-more")));
+        let args =
+            ["--variant", "tat", "--name", "straight", "--steps", steps, "--batch-size", "4", "--continue-shipped"];
+        with(with(base, &args), extra)
+    };
+    let continued = ok(anymo(&models, &strs(&more("8", &[]))).output().unwrap());
+    assert!(String::from_utf8_lossy(&continued.stderr).contains("continuing straight from step 6"));
+    let card: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ck/straight.json")).unwrap()).unwrap();
+    assert_eq!((card["steps"].as_u64(), card["config"]["training"]["start"].as_u64()), (Some(8), Some(6)));
+    assert!(card["command"].as_str().unwrap().contains("--steps 6 --batch-size 4 --save-every 0 && "), "{card}");
+    let after = tensors(&dir.join("ck/straight.safetensors"));
+    assert!(a.iter().zip(&after).any(|((_, before), (_, now))| before != now), "training went on");
+    let again = anymo(&models, &strs(&more("8", &[]))).output().unwrap();
+    assert!(String::from_utf8_lossy(&again.stderr).contains("has 8 steps already"), "{again:?}");
+    let other = anymo(&models, &strs(&more("10", &["--codes", "512"]))).output().unwrap();
+    assert!(String::from_utf8_lossy(&other.stderr).contains("another configuration"), "{other:?}");
 
     let baseline = with(
         with(vec!["train".into(), "tokenizer".into()], &strs(&common("baseline"))),

@@ -2,7 +2,7 @@
 //! baseline and ablations) on a manifest's train split, and ship the checkpoint with its card.
 
 use super::context::StoreArgs;
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use anymo_generator::generate::Kind;
 use anymo_generator::{Evaluator, EvaluatorConfig, Generator, GeneratorConfig, TokenClip};
 use anymo_services::models::{data, generation, shipped, train};
@@ -174,6 +174,11 @@ struct TokenizerArgs {
     /// Codes per RVQ layer.
     #[arg(long, default_value_t = 1024)]
     codes: usize,
+    /// Continue training the checkpoint of this name in the output folder (its weights and
+    /// codebooks; the optimiser and the learning-rate warm-up start again) up to `--steps` in
+    /// all, so that training can go on across machines that do not keep run states.
+    #[arg(long)]
+    continue_shipped: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -294,10 +299,18 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         }
     };
     eprintln!("{name}: {} parameters", codec.params().count());
+    let data = data::data_record(&args.common.manifest, &train_clips);
+    let previous = if args.continue_shipped {
+        Some(load_to_continue(codec.as_mut(), &args, &name, &config, &data)?)
+    } else {
+        None
+    };
+    let start = previous.as_ref().map_or(0, |card| card.steps);
     let settings = train::CodecTraining {
         steps: args.steps,
+        start,
         lr: args.lr,
-        warmup: 200.min(args.steps / 10),
+        warmup: 200.min((args.steps - start) / 10),
         seed: args.common.seed,
         batch_size: args.batch_size,
         max_batch_joints: 16 * 24,
@@ -307,6 +320,11 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
     let motions = train_clips.iter().map(|c| c.motion.clone()).collect();
     let mut graph_of = |s: &Skeleton| -> Result<SkeletonGraph> { Ok(SkeletonGraph::new(s, &mut encoder)?) };
     let state = train::train_codec(codec.as_mut(), motions, &mut graph_of, &settings, &run)?;
+    let earlier_seconds = previous.as_ref().and_then(|card| card.metrics["train_seconds"].as_f64()).unwrap_or(0.0);
+    let command = match &previous {
+        Some(card) => format!("{} && {}", card.command, command_line()),
+        None => command_line(),
+    };
     let card = ModelCard {
         model: name.clone(),
         config: {
@@ -314,14 +332,54 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
             c["training"] = serde_json::to_value(&settings)?;
             c
         },
-        data: data::data_record(&args.common.manifest, &train_clips),
+        data,
         steps: state.step,
-        metrics: serde_json::json!({ "train_seconds": state.seconds }),
-        command: command_line(),
+        metrics: serde_json::json!({ "train_seconds": earlier_seconds + state.seconds }),
+        command,
     };
     train::ship(codec.params(), &card, &args.common.out_dir, &name)?;
     eprintln!("wrote {}", args.common.out_dir.join(format!("{name}.safetensors")).display());
     Ok(())
+}
+
+/// Loads the shipped checkpoint `name` into `codec` to continue it, after checking that it was
+/// trained with the same configuration and on the same data, and has fewer steps than asked for.
+fn load_to_continue(
+    codec: &mut dyn Codec,
+    args: &TokenizerArgs,
+    name: &str,
+    config: &serde_json::Value,
+    data: &DataRecord,
+) -> Result<ModelCard> {
+    let dir = &args.common.out_dir;
+    let previous = shipped::card(dir, name)?;
+    let model_config = |c: &serde_json::Value| {
+        let mut c = c.clone();
+        c.as_object_mut().map(|o| o.remove("training"));
+        c
+    };
+    if model_config(&previous.config) != model_config(config) {
+        bail!(
+            "{name} in {} was trained with another configuration; continue it with the options it was trained with",
+            dir.display()
+        );
+    }
+    if previous.data != *data {
+        bail!(
+            "{name} was trained on other data ({} clips of {}, blake3 {}); continue it on the same clips",
+            previous.data.clips,
+            previous.data.source,
+            previous.data.manifest_blake3
+        );
+    }
+    if previous.steps >= args.steps {
+        bail!("{name} has {} steps already; pass --steps above that to continue it", previous.steps);
+    }
+    let (weights, _) = shipped::files(dir, name);
+    let rest = codec.params_mut().load(&weights).with_context(|| format!("loading {}", weights.display()))?;
+    codec.restore_buffers(&rest)?;
+    eprintln!("continuing {name} from step {}", previous.steps);
+    Ok(previous)
 }
 
 /// The train split tokenized by the shipped tokenizer, and the card fields that describe it.

@@ -151,8 +151,12 @@ pub fn pretrain_owo(
 /// Settings of a tokenizer training run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct CodecTraining {
-    /// Optimiser steps.
+    /// Optimiser steps in all.
     pub steps: u64,
+    /// Steps of the checkpoint the run continues (0 for a fresh one): the run starts there, and
+    /// its learning rate warms up and decays over the steps after it.
+    #[serde(default)]
+    pub start: u64,
     /// Peak learning rate.
     pub lr: f64,
     /// Warm-up steps.
@@ -196,7 +200,9 @@ pub fn train_codec(
     run: &RunDir,
 ) -> Result<RunState> {
     let mut optimiser = AdamW::new(codec.params(), AdamWConfig::default())?;
-    let mut state = RunState::default();
+    // A continued run starts at its checkpoint's step, with epochs numbered from there so that it
+    // draws new shuffles.
+    let mut state = RunState { step: settings.start, epoch: settings.start, ..RunState::default() };
     if let Some(saved) = run.state()? {
         let rest = run.restore(codec.params_mut(), &mut optimiser)?;
         codec.restore_buffers(&rest)?;
@@ -232,7 +238,7 @@ pub fn train_codec(
             optimiser.step(
                 codec.params(),
                 &grads,
-                schedule(settings.lr, settings.warmup, settings.steps, state.step),
+                schedule(settings.lr, settings.warmup, settings.steps - settings.start, state.step - settings.start),
             )?;
             running.add(&parts);
             frames += batch.sources.len() * batch.rotations.dim(1)?;
