@@ -4,7 +4,7 @@
 //! each node a zeroed buffer and an add, and sums the gain's and bias's gradients over the rows
 //! with an index division per element.
 
-use super::cpu;
+use super::cpu::values;
 use super::params::Params;
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
@@ -28,10 +28,6 @@ impl LayerNorm {
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         x.contiguous()?.apply_op3(&self.gain, &self.bias, Normalise)
     }
-}
-
-fn values<'a>(storage: &'a CpuStorage, layout: &Layout) -> Result<&'a [f32]> {
-    cpu::values(storage, layout, "layer norm")
 }
 
 /// Writes the normalised row `x̂` of `x` and returns `1 / sqrt(var + eps)`.
@@ -62,7 +58,8 @@ impl CustomOp3 for Normalise {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let (x, gain, bias) = (values(s1, l1)?, values(s2, l2)?, values(s3, l3)?);
+        let (x, gain, bias) =
+            (values(s1, l1, self.name())?, values(s2, l2, self.name())?, values(s3, l3, self.name())?);
         let d = gain.len();
         let mut out = vec![0f32; x.len()];
         for (row, y) in x.chunks_exact(d).zip(out.chunks_exact_mut(d)) {
@@ -105,7 +102,7 @@ impl CustomOp3 for Gradients {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let (x, gain, dy) = (values(s1, l1)?, values(s2, l2)?, values(s3, l3)?);
+        let (x, gain, dy) = (values(s1, l1, self.name())?, values(s2, l2, self.name())?, values(s3, l3, self.name())?);
         let d = gain.len();
         let rows = x.len() / d;
         let mut out = vec![0f32; (rows + 2) * d];

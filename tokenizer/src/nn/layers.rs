@@ -4,7 +4,7 @@ use super::bias::add_bias;
 use super::layer_norm::LayerNorm;
 use super::params::Params;
 use super::relu::relu;
-use super::softmax::softmax_last_dim;
+use super::softmax::softmax_with_backward;
 use candle_core::{Result, Tensor};
 
 /// `y = x W + b` over the last dimension. Inputs of any rank are flattened to one 2-D matmul.
@@ -148,7 +148,7 @@ impl Attention {
         if let Some(mask) = mask {
             scores = scores.broadcast_add(mask)?;
         }
-        let weights = softmax_last_dim(&scores)?;
+        let weights = softmax_with_backward(&scores)?;
         let mixed = weights.matmul(&v)?.reshape((n, self.heads, l, head))?.transpose(1, 2)?.reshape((n, l, dim))?;
         self.out.forward(&mixed)
     }

@@ -32,4 +32,4 @@ pub use layers::{Activation, Attention, FeedForward, Linear, TransformerLayer};
 pub use params::Params;
 pub use relu::relu;
 pub use repeat::{repeat_dim1, repeat_rows};
-pub use softmax::softmax_last_dim;
+pub use softmax::softmax_with_backward;

@@ -7,7 +7,7 @@ use super::cpu::values;
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tensor};
 
 /// Softmax over the last dimension of `x` (f32).
-pub fn softmax_last_dim(x: &Tensor) -> Result<Tensor> {
+pub fn softmax_with_backward(x: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op1(Softmax)
 }
 
@@ -75,7 +75,7 @@ mod tests {
         let w: Vec<f32> = (0..4 * 3 * 7).map(|_| rng.random_range(-1.0..1.0)).collect();
         let x = Var::from_vec(v, (4, 3, 7), &Device::Cpu).unwrap();
         let weights = Tensor::from_vec(w, (4, 3, 7), &Device::Cpu).unwrap();
-        let fused = softmax_last_dim(x.as_tensor()).unwrap();
+        let fused = softmax_with_backward(x.as_tensor()).unwrap();
         let composite = candle_nn::ops::softmax(x.as_tensor(), D::Minus1).unwrap();
         let loss = |y: &Tensor| (y * &weights).unwrap().sum_all().unwrap().backward().unwrap();
         let pairs = [
@@ -94,7 +94,7 @@ mod tests {
     #[test]
     fn rows_sum_to_one_and_masked_entries_get_nothing() {
         let x = Tensor::new(&[[0.0f32, f32::NEG_INFINITY, 1.0], [f32::NEG_INFINITY; 3]], &Device::Cpu).unwrap();
-        let y = softmax_last_dim(&x).unwrap().to_vec2::<f32>().unwrap();
+        let y = softmax_with_backward(&x).unwrap().to_vec2::<f32>().unwrap();
         let e = 1f32.exp();
         assert_eq!(y[0], vec![1.0 / (1.0 + e), 0.0, e / (1.0 + e)]);
         assert_eq!(y[1], vec![0.0; 3]);
