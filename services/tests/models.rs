@@ -84,7 +84,7 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     }
 
     // Continuing the shipped checkpoint: it starts at its 6 steps, ends at the new total, and
-    // its card says where it came from. A total it has reached, or other options, are refused.
+    // its card says where it came from. A total it has reached, or another model shape, is refused.
     let more = |steps: &str, extra: &[&str]| {
         let base = with(vec!["train".into(), "tokenizer".into()], &strs(&common("straight-more")));
         let args =
@@ -103,6 +103,14 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     assert!(String::from_utf8_lossy(&again.stderr).contains("has 8 steps already"), "{again:?}");
     let other = anymo(&models, &strs(&more("10", &["--codes", "512"]))).output().unwrap();
     assert!(String::from_utf8_lossy(&other.stderr).contains("another configuration"), "{other:?}");
+    // Loss weights and augmentation shape the run, not the model: a continued run may change
+    // them, and its card records the new ones.
+    ok(anymo(&models, &strs(&more("10", &["--weight", "rotation=2", "--rebase", "0.25"]))).output().unwrap());
+    let card: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ck/straight.json")).unwrap()).unwrap();
+    assert_eq!(card["config"]["tokenizer"]["weights"]["rotation"].as_f64(), Some(2.0), "{card}");
+    assert_eq!(card["config"]["training"]["rebase"].as_f64(), Some(0.25), "{card}");
+    assert_eq!(card["config"]["training"]["start"].as_u64(), Some(8));
 
     let baseline = with(
         with(vec!["train".into(), "tokenizer".into()], &strs(&common("baseline"))),
@@ -136,7 +144,17 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
             assert_eq!(m["clips"], 3, "{model} {split}");
             let mpjpe = m["mpjpe"].as_f64().unwrap();
             assert!(mpjpe.is_finite() && mpjpe > 0.0, "{model} {split}: {mpjpe}");
+            let heading = m["mpjpe_heading"].as_f64().unwrap();
+            assert!(heading.is_finite() && heading > 0.0, "{model} {split}: {heading}");
         }
+    }
+    // The static reference keeps the true root, so its root-aligned and heading-aligned MPJPE
+    // agree, and it moves no joint, so it has an error.
+    for split in ["test", "zero-shot"] {
+        let m = &results["static pose (reference)"][split];
+        assert_eq!(m["clips"], 3, "{split}");
+        let (plain, heading) = (m["mpjpe"].as_f64().unwrap(), m["mpjpe_heading"].as_f64().unwrap());
+        assert!(plain > 0.0 && (plain - heading).abs() < 1e-6, "{split}: {plain} {heading}");
     }
 
     // Tokens and transfer with the tiny checkpoint: the output keeps the target's hierarchy.

@@ -24,6 +24,19 @@ pub fn mpjpe_root_aligned(predicted: &[Vec3], truth: &[Vec3], joints: usize) -> 
     mean(errors)
 }
 
+/// MPJPE after aligning the root position and turning each predicted frame about +Y by
+/// `turns[frame]` radians: with the heading differences as turns, an error of heading that
+/// builds up over a long clip no longer counts, so what is left is the pose.
+pub fn mpjpe_heading_aligned(predicted: &[Vec3], truth: &[Vec3], joints: usize, turns: &[f32]) -> f32 {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    assert_eq!(predicted.len(), joints * turns.len(), "one turn per frame");
+    let errors = predicted.chunks(joints).zip(truth.chunks(joints)).zip(turns).flat_map(|((p, t), &turn)| {
+        let (pr, tr, turn) = (p[0], t[0], Quat::from_rotation_y(turn));
+        p.iter().zip(t).map(move |(a, b)| (turn * (*a - pr)).distance(*b - tr))
+    });
+    mean(errors)
+}
+
 /// Mean geodesic angle in degrees between corresponding local rotations.
 pub fn geodesic_distance_deg(predicted: &[Quat], truth: &[Quat]) -> f32 {
     assert_eq!(predicted.len(), truth.len(), "same frames and joints");
@@ -64,6 +77,22 @@ fn mean(values: impl Iterator<Item = f32>) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn heading_alignment_removes_a_turn_and_nothing_else() {
+        // One frame of a root and two joints; the prediction is the truth turned by 90 degrees
+        // about +Y around the root, then moved by 2 in x, with the last joint also 1 too high.
+        let truth = [Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 1.0), Vec3::new(2.0, 1.0, 0.0)];
+        let turn = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        let mut predicted: Vec<Vec3> =
+            truth.iter().map(|p| turn * (*p - truth[0]) + truth[0] + Vec3::new(2.0, 0.0, 0.0)).collect();
+        predicted[2].y += 1.0;
+        // Root-aligned only, the middle joint is sqrt(2) off and the last one sqrt(3).
+        let plain = mpjpe_root_aligned(&predicted, &truth, 3);
+        assert!((plain - (2f32.sqrt() + 3f32.sqrt()) / 3.0).abs() < 1e-5, "{plain}");
+        let aligned = mpjpe_heading_aligned(&predicted, &truth, 3, &[-std::f32::consts::FRAC_PI_2]);
+        assert!((aligned - 1.0 / 3.0).abs() < 1e-5, "{aligned}");
+    }
 
     #[test]
     fn mpjpe_with_and_without_translation() {

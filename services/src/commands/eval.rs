@@ -145,12 +145,7 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
     eprintln!("{} test and zero-shot clips ({rejected} rejected by cleaning)", eval_clips.len());
     let mut encoder = CachedEncoder::new(args.store.encoder()?);
     let mut results = serde_json::Map::new();
-    let mut table = String::from(
-        "| model | split | clips | MPJPE | MPJPE (with trans) | GeoDist (deg) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|\n",
-    );
-    let mut per_source = String::from(
-        "| model | split | source | clips | MPJPE | MPJPE (with trans) | GeoDist (deg) |\n|---|---|---|---|---|---|---|\n",
-    );
+    let mut tables = Tables::default();
     for name in &args.models {
         let (mut codec, card) = codecs::load(&args.dir, name, &mut encoder)?;
         let (window, overlap) = card.config.get("tokenizer").map_or((64, 16), |t| {
@@ -158,42 +153,7 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         });
         let mut graphs = Graphs::new(&mut encoder);
         let rec = evaluate::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, window, overlap)?;
-        let mut by_split: BTreeMap<String, Sums> = BTreeMap::new();
-        let mut model_json = serde_json::Map::new();
-        for ((split, source), sums) in &rec.groups {
-            by_split.entry(split.clone()).or_default().merge(sums);
-            let s = sums.scores();
-            per_source.push_str(&format!(
-                "| {name} | {split} | {source} | {} | {} | {} | {:.2} |\n",
-                s.clips,
-                f(s.mpjpe),
-                f(s.mpjpe_trans),
-                s.geodist
-            ));
-            model_json.insert(format!("{split}/{source}"), serde_json::to_value(s)?);
-        }
-        for (split, sums) in &by_split {
-            let s = sums.scores();
-            table.push_str(&format!(
-                "| {name} | {split} | {} | {} | {} | {:.2} | {} | {} | {} | {} |\n",
-                s.clips,
-                f(s.mpjpe),
-                f(s.mpjpe_trans),
-                s.geodist,
-                f(s.fs),
-                f(s.gp),
-                f(s.fs_truth),
-                f(s.gp_truth)
-            ));
-            model_json.insert(split.clone(), serde_json::to_value(s)?);
-        }
-        if rec.refused > 0 {
-            table.push_str(&format!(
-                "| {name} | refused | {} | (skeleton larger than the model takes) | | | | | | |\n",
-                rec.refused
-            ));
-            model_json.insert("refused".into(), rec.refused.into());
-        }
+        let model_json = tables.add(name, &rec)?;
         if args.record {
             let (_, card_path) = shipped::files(&args.dir, name);
             let mut card = card;
@@ -203,6 +163,9 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         }
         results.insert(name.clone(), serde_json::Value::Object(model_json));
     }
+    let reference = evaluate::static_reference(&eval_clips);
+    results.insert(STATIC_REFERENCE.into(), serde_json::Value::Object(tables.add(STATIC_REFERENCE, &reference)?));
+    let Tables { table, per_source } = tables;
     println!("{table}\n{per_source}");
     if args.models.iter().any(|m| m == "tat") {
         let transfers = transfer_table(&args, &clips, &mut encoder)?;
@@ -236,6 +199,77 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         std::fs::write(path, serde_json::to_string_pretty(&results)?)?;
     }
     Ok(())
+}
+
+/// The reference row's name: each clip held in its mean pose (see [`evaluate::static_pose`]).
+const STATIC_REFERENCE: &str = "static pose (reference)";
+
+/// The reconstruction tables, per split and per source, as Markdown.
+struct Tables {
+    table: String,
+    per_source: String,
+}
+
+impl Default for Tables {
+    fn default() -> Self {
+        Tables {
+            table: String::from(
+                "| model | split | clips | MPJPE | MPJPE (heading aligned) | MPJPE (with trans) | GeoDist (deg) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+            ),
+            per_source: String::from(
+                "| model | split | source | clips | MPJPE | MPJPE (heading aligned) | MPJPE (with trans) | GeoDist (deg) |\n|---|---|---|---|---|---|---|---|\n",
+            ),
+        }
+    }
+}
+
+impl Tables {
+    /// Adds one model's rows; returns its scores per split and per source, as JSON.
+    fn add(
+        &mut self,
+        name: &str,
+        rec: &evaluate::Reconstruction,
+    ) -> Result<serde_json::Map<String, serde_json::Value>> {
+        let mut by_split: BTreeMap<String, Sums> = BTreeMap::new();
+        let mut model_json = serde_json::Map::new();
+        for ((split, source), sums) in &rec.groups {
+            by_split.entry(split.clone()).or_default().merge(sums);
+            let s = sums.scores();
+            self.per_source.push_str(&format!(
+                "| {name} | {split} | {source} | {} | {} | {} | {} | {:.2} |\n",
+                s.clips,
+                f(s.mpjpe),
+                f(s.mpjpe_heading),
+                f(s.mpjpe_trans),
+                s.geodist
+            ));
+            model_json.insert(format!("{split}/{source}"), serde_json::to_value(s)?);
+        }
+        for (split, sums) in &by_split {
+            let s = sums.scores();
+            self.table.push_str(&format!(
+                "| {name} | {split} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} |\n",
+                s.clips,
+                f(s.mpjpe),
+                f(s.mpjpe_heading),
+                f(s.mpjpe_trans),
+                s.geodist,
+                f(s.fs),
+                f(s.gp),
+                f(s.fs_truth),
+                f(s.gp_truth)
+            ));
+            model_json.insert(split.clone(), serde_json::to_value(s)?);
+        }
+        if rec.refused > 0 {
+            self.table.push_str(&format!(
+                "| {name} | refused | {} | (skeleton larger than the model takes) | | | | | | | |\n",
+                rec.refused
+            ));
+            model_json.insert("refused".into(), rec.refused.into());
+        }
+        Ok(model_json)
+    }
 }
 
 /// Human -> human of other proportions, human -> quadruped, quadruped -> quadruped, each from

@@ -6,7 +6,7 @@ use anyhow::{Context, Result, bail};
 use anymo_generator::generate::Kind;
 use anymo_generator::{Evaluator, EvaluatorConfig, Generator, GeneratorConfig, TokenClip};
 use anymo_services::models::{data, generation, shipped, train};
-use anymo_tokenizer::dataset::Split;
+use anymo_tokenizer::dataset::{LoaderConfig, Split};
 use anymo_tokenizer::features::{canonicalise, to_features};
 use anymo_tokenizer::nn::DataRecord;
 use anymo_tokenizer::nn::{ModelCard, Params};
@@ -179,6 +179,13 @@ struct TokenizerArgs {
     /// all, so that training can go on across machines that do not keep run states.
     #[arg(long)]
     continue_shipped: bool,
+    /// A loss term's weight, as NAME=VALUE (repeatable). The terms: rotation, root, position,
+    /// velocity, contact, skating, commitment; the others keep their defaults.
+    #[arg(long = "weight", value_name = "NAME=VALUE", value_parser = parse_weight)]
+    weights: Vec<(String, f32)>,
+    /// Probability of rebasing a window's rest pose on one of its frames (NEC C.1).
+    #[arg(long, default_value_t = LoaderConfig::default().rebase)]
+    rebase: f64,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -263,6 +270,7 @@ fn root_stats(clips: &[&data::ModelClip]) -> RootStats {
 }
 
 fn tokenizer(args: TokenizerArgs) -> Result<()> {
+    let weights = loss_weights(&args.weights)?;
     let clips = load(&args.common)?;
     let train_clips: Vec<&data::ModelClip> = clips.iter().filter(|c| c.split == Split::Train).collect();
     let stats = root_stats(&train_clips);
@@ -278,8 +286,7 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
     let (mut codec, config): (Box<dyn Codec>, serde_json::Value) = match args.variant {
         Variant::Baseline => {
             let max_joints = clips.iter().map(|c| c.motion.skeleton().len()).max().unwrap_or(1);
-            let config =
-                BaselineConfig { max_joints, dim: 256, blocks: 2, rvq, root: stats, weights: LossWeights::default() };
+            let config = BaselineConfig { max_joints, dim: 256, blocks: 2, rvq, root: stats, weights };
             let value = serde_json::json!({ "baseline": config });
             (Box::new(Baseline::new(config, args.common.seed)?), value)
         }
@@ -287,6 +294,7 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
             let fusion = if v == Variant::TatAdditive { Fusion::Additive } else { Fusion::Film };
             let mut config = TokenizerConfig::new(stats, fusion);
             config.rvq = rvq;
+            config.weights = weights;
             config.owo = OwoConfig::default();
             let tat = Tat::new(config.clone(), args.common.seed, &mut owo_params, global)?;
             if owo_name != "random" {
@@ -314,6 +322,7 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
         seed: args.common.seed,
         batch_size: args.batch_size,
         max_batch_joints: 16 * 24,
+        rebase: args.rebase,
         save_every_seconds: args.common.save_every,
     };
     let run = run_dir(&args.common, &name)?;
@@ -342,8 +351,34 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
     Ok(())
 }
 
-/// Loads the shipped checkpoint `name` into `codec` to continue it, after checking that it was
-/// trained with the same configuration and on the same data, and has fewer steps than asked for.
+/// A `NAME=VALUE` loss weight from the command line.
+fn parse_weight(text: &str) -> Result<(String, f32), String> {
+    let (name, value) = text.split_once('=').ok_or_else(|| format!("expected NAME=VALUE, found {text:?}"))?;
+    let value: f32 = value.parse().map_err(|_| format!("the weight of {name} is not a number: {value:?}"))?;
+    if !value.is_finite() || value < 0.0 {
+        return Err(format!("the weight of {name} must be a finite number of at least 0, not {value}"));
+    }
+    Ok((name.to_string(), value))
+}
+
+/// The default loss weights with the given ones set.
+fn loss_weights(set: &[(String, f32)]) -> Result<LossWeights> {
+    let mut weights = serde_json::to_value(LossWeights::default())?;
+    for (name, value) in set {
+        match weights.get_mut(name) {
+            Some(slot) => *slot = (*value).into(),
+            None => bail!(
+                "no loss term is called {name}; the terms are {}",
+                weights.as_object().map(|o| o.keys().cloned().collect::<Vec<_>>().join(", ")).unwrap_or_default()
+            ),
+        }
+    }
+    Ok(serde_json::from_value(weights)?)
+}
+
+/// Loads the shipped checkpoint `name` into `codec` to continue it, after checking that it has
+/// the same model configuration (loss weights may differ), was trained on the same data, and
+/// has fewer steps than asked for.
 fn load_to_continue(
     codec: &mut dyn Codec,
     args: &TokenizerArgs,
@@ -353,9 +388,16 @@ fn load_to_continue(
 ) -> Result<ModelCard> {
     let dir = &args.common.out_dir;
     let previous = shipped::card(dir, name)?;
+    // The loss weights and the training settings shape the run, not the model: a continued run
+    // may change them, and its card records the new ones.
     let model_config = |c: &serde_json::Value| {
         let mut c = c.clone();
-        c.as_object_mut().map(|o| o.remove("training"));
+        if let Some(o) = c.as_object_mut() {
+            o.remove("training");
+            for model in ["tokenizer", "baseline"] {
+                o.get_mut(model).and_then(|m| m.as_object_mut()).map(|m| m.remove("weights"));
+            }
+        }
         c
     };
     if model_config(&previous.config) != model_config(config) {

@@ -6,9 +6,11 @@
 use super::codecs::Graphs;
 use super::data::ModelClip;
 use anyhow::Result;
-use anymo_tokenizer::features::foot_joints;
+use anymo_tokenizer::features::{canonicalise, foot_joints, heading_of};
 use anymo_tokenizer::kinematics::all_joint_positions;
-use anymo_tokenizer::metrics::{foot_skating, geodesic_distance_deg, ground_penetration, mpjpe, mpjpe_root_aligned};
+use anymo_tokenizer::metrics::{
+    foot_skating, geodesic_distance_deg, ground_penetration, mpjpe, mpjpe_heading_aligned, mpjpe_root_aligned,
+};
 use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
 use anymo_tokenizer::tat::{Codec, Tat};
@@ -29,6 +31,7 @@ pub struct Sums {
     pub frames: usize,
     mpjpe: f64,
     mpjpe_trans: f64,
+    mpjpe_heading: f64,
     geodist: f64,
     fs: f64,
     gp: f64,
@@ -47,6 +50,9 @@ pub struct Scores {
     pub mpjpe: f64,
     /// MPJPE with translation, diameters.
     pub mpjpe_trans: f64,
+    /// MPJPE with the root's position and heading aligned per frame: the pose alone, without
+    /// the heading error that builds up over a long clip.
+    pub mpjpe_heading: f64,
     /// Mean geodesic distance of local rotations, degrees.
     pub geodist: f64,
     /// Foot skating of the reconstruction, diameters per second.
@@ -72,6 +78,9 @@ impl Sums {
         self.frames += frames;
         self.mpjpe += w * mpjpe_root_aligned(&pr, &pt, n) as f64;
         self.mpjpe_trans += w * mpjpe(&pr, &pt) as f64;
+        let turns: Vec<f32> =
+            (0..frames).map(|f| heading_of(truth.rotations(f)[0]) - heading_of(rebuilt.rotations(f)[0])).collect();
+        self.mpjpe_heading += w * mpjpe_heading_aligned(&pr, &pt, n, &turns) as f64;
         self.geodist += w * geodesic_distance_deg(rebuilt.all_rotations(), truth.all_rotations()) as f64;
         self.fs += w * foot_skating(&pr, n, &feet, fps, CONTACT_HEIGHT) as f64;
         self.gp += w * ground_penetration(&pr) as f64;
@@ -85,6 +94,7 @@ impl Sums {
         self.frames += o.frames;
         self.mpjpe += o.mpjpe;
         self.mpjpe_trans += o.mpjpe_trans;
+        self.mpjpe_heading += o.mpjpe_heading;
         self.geodist += o.geodist;
         self.fs += o.fs;
         self.gp += o.gp;
@@ -100,6 +110,7 @@ impl Sums {
             frames: self.frames,
             mpjpe: self.mpjpe / w,
             mpjpe_trans: self.mpjpe_trans / w,
+            mpjpe_heading: self.mpjpe_heading / w,
             geodist: self.geodist / w,
             fs: self.fs / w,
             gp: self.gp / w,
@@ -139,6 +150,42 @@ pub fn reconstruction(
         }
     }
     Ok(out)
+}
+
+/// A clip held still: every joint but the root keeps its mean local rotation over the clip, and
+/// the root moves as it does in the clip. A reference for the table: a tokenizer that keeps no
+/// motion but the root's would score this.
+pub fn static_pose(motion: &Motion) -> Motion {
+    let (n, frames) = (motion.skeleton().len(), motion.frames());
+    let mean: Vec<glam::Quat> = (0..n)
+        .map(|j| {
+            let first = glam::Vec4::from(motion.rotations(0)[j]);
+            let sum = (0..frames).fold(glam::Vec4::ZERO, |acc, f| {
+                let q = glam::Vec4::from(motion.rotations(f)[j]);
+                acc + if q.dot(first) < 0.0 { -q } else { q }
+            });
+            glam::Quat::from_vec4(sum).normalize()
+        })
+        .collect();
+    let rotations = (0..frames)
+        .flat_map(|f| (0..n).map(move |j| (f, j)))
+        .map(|(f, j)| if j == 0 { motion.rotations(f)[0] } else { mean[j] })
+        .collect();
+    Motion::new(motion.skeleton().clone(), motion.frame_time(), rotations, motion.all_translations().to_vec())
+        .expect("the clip's own shapes")
+}
+
+/// The [`static_pose`] reference over the clips, grouped like [`reconstruction`].
+pub fn static_reference(clips: &[&ModelClip]) -> Reconstruction {
+    let mut out = Reconstruction::default();
+    for clip in clips {
+        let truth = canonicalise(&clip.motion);
+        out.groups
+            .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
+            .or_default()
+            .add(&truth, &static_pose(&truth));
+    }
+    out
 }
 
 /// One transfer direction: clips of one kind onto one target skeleton.

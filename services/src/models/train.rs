@@ -169,6 +169,9 @@ pub struct CodecTraining {
     pub max_batch_joints: usize,
     /// Seconds between saves of the run state.
     pub save_every_seconds: u64,
+    /// Probability of rebasing a window's rest pose (cards that do not record it were trained
+    /// with 0.5).
+    pub rebase: f64,
 }
 
 /// Running means of the loss terms, for the progress bar.
@@ -213,6 +216,7 @@ pub fn train_codec(
         batch_size: settings.batch_size,
         max_batch_joints: settings.max_batch_joints,
         seed: settings.seed,
+        rebase: settings.rebase,
         ..LoaderConfig::default()
     };
     let mut loader = WindowLoader::new(clips, config);

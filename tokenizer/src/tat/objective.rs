@@ -148,11 +148,15 @@ pub struct LossWeights {
 }
 
 impl Default for LossWeights {
+    /// Rotation, root and position weights are the ones that measured best when the shipped TAT
+    /// was continued (README, "What the recipe changed"): positions cannot see a bone's twist
+    /// about its own axis, so only the rotation term pins it, and the root features carry the
+    /// heading that long clips integrate.
     fn default() -> Self {
         LossWeights {
-            rotation: 1.0,
-            root: 0.5,
-            position: 4.0,
+            rotation: 10.0,
+            root: 4.0,
+            position: 16.0,
             velocity: 20.0,
             contact: 0.1,
             skating: 20.0,
