@@ -144,17 +144,19 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
             assert_eq!(m["clips"], 3, "{model} {split}");
             let mpjpe = m["mpjpe"].as_f64().unwrap();
             assert!(mpjpe.is_finite() && mpjpe > 0.0, "{model} {split}: {mpjpe}");
-            let heading = m["mpjpe_heading"].as_f64().unwrap();
-            assert!(heading.is_finite() && heading > 0.0, "{model} {split}: {heading}");
+            let yaw = m["mpjpe_yaw"].as_f64().unwrap();
+            assert!(yaw.is_finite() && yaw > 0.0, "{model} {split}: {yaw}");
         }
     }
-    // The static reference keeps the true root, so its root-aligned and heading-aligned MPJPE
-    // agree, and it moves no joint, so it has an error.
+    // The static reference keeps the true root, so its MPJPE with translation is its
+    // root-aligned one, and it moves no joint, so it has an error.
     for split in ["test", "zero-shot"] {
         let m = &results["static pose (reference)"][split];
         assert_eq!(m["clips"], 3, "{split}");
-        let (plain, heading) = (m["mpjpe"].as_f64().unwrap(), m["mpjpe_heading"].as_f64().unwrap());
-        assert!(plain > 0.0 && (plain - heading).abs() < 1e-6, "{split}: {plain} {heading}");
+        let (plain, trans, yaw) =
+            (m["mpjpe"].as_f64().unwrap(), m["mpjpe_trans"].as_f64().unwrap(), m["mpjpe_yaw"].as_f64().unwrap());
+        assert!(plain > 0.0 && (plain - trans).abs() < 1e-6, "{split}: {plain} {trans}");
+        assert!(yaw.is_finite() && yaw > 0.0, "{split}: {yaw}");
     }
 
     // Tokens and transfer with the tiny checkpoint: the output keeps the target's hierarchy.

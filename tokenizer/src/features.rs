@@ -43,8 +43,8 @@ pub struct MotionFeatures {
     pub rotations: Vec<f32>,
 }
 
-/// The heading (yaw about +Y, radians) of a rotation: which way a root with it faces.
-pub fn heading_of(q: Quat) -> f32 {
+/// The heading (yaw about +Y) of a rotation.
+fn heading_of(q: Quat) -> f32 {
     let twist = twist_about(q, Vec3::Y);
     2.0 * twist.y.atan2(twist.w)
 }

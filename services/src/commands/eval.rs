@@ -214,10 +214,10 @@ impl Default for Tables {
     fn default() -> Self {
         Tables {
             table: String::from(
-                "| model | split | clips | MPJPE | MPJPE (heading aligned) | MPJPE (with trans) | GeoDist (deg) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+                "| model | split | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (with trans) | GeoDist (deg) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
             ),
             per_source: String::from(
-                "| model | split | source | clips | MPJPE | MPJPE (heading aligned) | MPJPE (with trans) | GeoDist (deg) |\n|---|---|---|---|---|---|---|---|\n",
+                "| model | split | source | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (with trans) | GeoDist (deg) |\n|---|---|---|---|---|---|---|---|\n",
             ),
         }
     }
@@ -239,7 +239,7 @@ impl Tables {
                 "| {name} | {split} | {source} | {} | {} | {} | {} | {:.2} |\n",
                 s.clips,
                 f(s.mpjpe),
-                f(s.mpjpe_heading),
+                f(s.mpjpe_yaw),
                 f(s.mpjpe_trans),
                 s.geodist
             ));
@@ -251,7 +251,7 @@ impl Tables {
                 "| {name} | {split} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} |\n",
                 s.clips,
                 f(s.mpjpe),
-                f(s.mpjpe_heading),
+                f(s.mpjpe_yaw),
                 f(s.mpjpe_trans),
                 s.geodist,
                 f(s.fs),

@@ -6,10 +6,10 @@
 use super::codecs::Graphs;
 use super::data::ModelClip;
 use anyhow::Result;
-use anymo_tokenizer::features::{canonicalise, foot_joints, heading_of};
+use anymo_tokenizer::features::{canonicalise, foot_joints};
 use anymo_tokenizer::kinematics::all_joint_positions;
 use anymo_tokenizer::metrics::{
-    foot_skating, geodesic_distance_deg, ground_penetration, mpjpe, mpjpe_heading_aligned, mpjpe_root_aligned,
+    foot_skating, geodesic_distance_deg, ground_penetration, mpjpe, mpjpe_root_aligned, mpjpe_yaw_aligned,
 };
 use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
@@ -31,7 +31,7 @@ pub struct Sums {
     pub frames: usize,
     mpjpe: f64,
     mpjpe_trans: f64,
-    mpjpe_heading: f64,
+    mpjpe_yaw: f64,
     geodist: f64,
     fs: f64,
     gp: f64,
@@ -50,9 +50,9 @@ pub struct Scores {
     pub mpjpe: f64,
     /// MPJPE with translation, diameters.
     pub mpjpe_trans: f64,
-    /// MPJPE with the root's position and heading aligned per frame: the pose alone, without
-    /// the heading error that builds up over a long clip.
-    pub mpjpe_heading: f64,
+    /// MPJPE with the root's position and the best turn about +Y aligned per frame: the pose
+    /// alone, without the heading error that builds up over a long clip.
+    pub mpjpe_yaw: f64,
     /// Mean geodesic distance of local rotations, degrees.
     pub geodist: f64,
     /// Foot skating of the reconstruction, diameters per second.
@@ -78,9 +78,7 @@ impl Sums {
         self.frames += frames;
         self.mpjpe += w * mpjpe_root_aligned(&pr, &pt, n) as f64;
         self.mpjpe_trans += w * mpjpe(&pr, &pt) as f64;
-        let turns: Vec<f32> =
-            (0..frames).map(|f| heading_of(truth.rotations(f)[0]) - heading_of(rebuilt.rotations(f)[0])).collect();
-        self.mpjpe_heading += w * mpjpe_heading_aligned(&pr, &pt, n, &turns) as f64;
+        self.mpjpe_yaw += w * mpjpe_yaw_aligned(&pr, &pt, n) as f64;
         self.geodist += w * geodesic_distance_deg(rebuilt.all_rotations(), truth.all_rotations()) as f64;
         self.fs += w * foot_skating(&pr, n, &feet, fps, CONTACT_HEIGHT) as f64;
         self.gp += w * ground_penetration(&pr) as f64;
@@ -94,7 +92,7 @@ impl Sums {
         self.frames += o.frames;
         self.mpjpe += o.mpjpe;
         self.mpjpe_trans += o.mpjpe_trans;
-        self.mpjpe_heading += o.mpjpe_heading;
+        self.mpjpe_yaw += o.mpjpe_yaw;
         self.geodist += o.geodist;
         self.fs += o.fs;
         self.gp += o.gp;
@@ -110,7 +108,7 @@ impl Sums {
             frames: self.frames,
             mpjpe: self.mpjpe / w,
             mpjpe_trans: self.mpjpe_trans / w,
-            mpjpe_heading: self.mpjpe_heading / w,
+            mpjpe_yaw: self.mpjpe_yaw / w,
             geodist: self.geodist / w,
             fs: self.fs / w,
             gp: self.gp / w,
