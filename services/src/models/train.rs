@@ -35,6 +35,10 @@ pub struct RunState {
     pub batch: usize,
     /// Seconds spent training so far.
     pub seconds: f64,
+    /// Subdirectory holding the parameters and optimiser of this state (run directories saved
+    /// before it was recorded kept them at the top).
+    #[serde(default)]
+    pub saved_in: Option<String>,
 }
 
 impl RunDir {
@@ -54,22 +58,42 @@ impl RunDir {
         Ok(Some(serde_json::from_str(&text).with_context(|| format!("reading {}", path.display()))?))
     }
 
-    /// Restores parameters and optimiser from the run's last save; returns the saved buffers.
-    pub fn restore(&self, params: &mut Params, optimiser: &mut AdamW) -> Result<HashMap<String, Tensor>> {
-        let rest = params.load(&self.dir.join("params.safetensors")).context("loading the run's parameters")?;
-        optimiser.load(&self.dir.join("optimiser.safetensors")).context("loading the run's optimiser state")?;
+    /// Restores parameters and optimiser from the save that `state` records; returns the saved
+    /// buffers.
+    pub fn restore(&self, state: &RunState, params: &mut Params, optimiser: &mut AdamW) -> Result<HashMap<String, Tensor>> {
+        let dir = state.saved_in.as_ref().map_or_else(|| self.dir.clone(), |sub| self.dir.join(sub));
+        let rest = params.load(&dir.join("params.safetensors")).context("loading the run's parameters")?;
+        optimiser.load(&dir.join("optimiser.safetensors")).context("loading the run's optimiser state")?;
         Ok(rest)
     }
 
-    /// Saves parameters, optimiser and state; the state file is written last and renamed into
-    /// place, so a kill mid-save leaves the previous save usable.
+    /// Saves parameters, optimiser and state. Weights go to a directory of their own; the state
+    /// that names it is renamed into place last, so a kill at any point leaves one consistent
+    /// save (the new one or the previous one), never new weights under an old step.
     pub fn save(&self, params: &Params, optimiser: &AdamW, state: &RunState) -> Result<()> {
-        let tmp = |name: &str| self.dir.join(format!("{name}.tmp"));
-        params.save(&tmp("params.safetensors"))?;
-        optimiser.save(&tmp("optimiser.safetensors"))?;
-        std::fs::write(tmp("state.json"), serde_json::to_string_pretty(state)?)?;
-        for name in ["params.safetensors", "optimiser.safetensors", "state.json"] {
-            std::fs::rename(tmp(name), self.dir.join(name))?;
+        let sub = format!("save-{}", state.step);
+        let dir = self.dir.join(&sub);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        params.save(&dir.join("params.safetensors"))?;
+        optimiser.save(&dir.join("optimiser.safetensors"))?;
+        let state = RunState { saved_in: Some(sub.clone()), ..state.clone() };
+        let tmp = self.dir.join("state.json.tmp");
+        std::fs::write(&tmp, serde_json::to_string_pretty(&state)?)?;
+        std::fs::rename(&tmp, self.dir.join("state.json"))?;
+        self.remove_saves_other_than(&sub)
+    }
+
+    /// Deletes earlier saves, and weights of the layout before `saved_in`, once a newer save is
+    /// in place.
+    fn remove_saves_other_than(&self, keep: &str) -> Result<()> {
+        for entry in std::fs::read_dir(&self.dir)? {
+            let entry = entry?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with("save-") && name != keep {
+                std::fs::remove_dir_all(entry.path())?;
+            } else if name == "params.safetensors" || name == "optimiser.safetensors" {
+                std::fs::remove_file(entry.path())?;
+            }
         }
         Ok(())
     }
@@ -118,7 +142,7 @@ pub fn pretrain_owo(
     let mut optimiser = AdamW::new(&pretrainer.params, AdamWConfig::default())?;
     let mut state = RunState::default();
     if let Some(saved) = run.state()? {
-        run.restore(&mut pretrainer.params, &mut optimiser)?;
+        run.restore(&saved, &mut pretrainer.params, &mut optimiser)?;
         state = saved;
         eprintln!("resuming OwO pretraining at step {}", state.step);
     }
@@ -207,7 +231,7 @@ pub fn train_codec(
     // draws new shuffles.
     let mut state = RunState { step: settings.start, epoch: settings.start, ..RunState::default() };
     if let Some(saved) = run.state()? {
-        let rest = run.restore(codec.params_mut(), &mut optimiser)?;
+        let rest = run.restore(&saved, codec.params_mut(), &mut optimiser)?;
         codec.restore_buffers(&rest)?;
         state = saved;
         eprintln!("resuming at step {} (epoch {}, batch {})", state.step, state.epoch, state.batch);
@@ -306,7 +330,7 @@ pub fn train_steps<M>(
     let mut optimiser = AdamW::new(params_mut(model), AdamWConfig::default())?;
     let mut state = RunState::default();
     if let Some(saved) = run.state()? {
-        run.restore(params_mut(model), &mut optimiser)?;
+        run.restore(&saved, params_mut(model), &mut optimiser)?;
         state = saved;
         eprintln!("resuming at step {}", state.step);
     }
@@ -341,4 +365,44 @@ pub fn ship(params: &Params, card: &ModelCard, dir: &Path, name: &str) -> Result
     params.save(&dir.join(format!("{name}.safetensors")))?;
     card.save(&dir.join(format!("{name}.json")))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn values(params: &Params) -> Vec<f32> {
+        params.vars().next().unwrap().1.as_tensor().to_vec1().unwrap()
+    }
+
+    #[test]
+    fn a_save_cut_short_leaves_the_previous_one_whole() {
+        let dir = std::env::temp_dir().join(format!("anymo-run-dir-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let run = RunDir::new(&dir).unwrap();
+        let mut params = Params::new(0);
+        params.constant("w", &[2], 1.0).unwrap();
+        let optimiser = AdamW::new(&params, AdamWConfig::default()).unwrap();
+        let set = |params: &Params, v: f32| {
+            params.vars().next().unwrap().1.set(&Tensor::new(&[v, v], &candle_core::Device::Cpu).unwrap()).unwrap()
+        };
+        run.save(&params, &optimiser, &RunState { step: 1, ..RunState::default() }).unwrap();
+        set(&params, 2.0);
+        run.save(&params, &optimiser, &RunState { step: 2, ..RunState::default() }).unwrap();
+        assert!(!dir.join("save-1").exists(), "a newer save replaces the older one");
+
+        // A kill after the weights of step 3 were written but before its state was.
+        set(&params, 3.0);
+        std::fs::create_dir_all(dir.join("save-3")).unwrap();
+        params.save(&dir.join("save-3/params.safetensors")).unwrap();
+
+        let state = run.state().unwrap().unwrap();
+        assert_eq!(state.step, 2);
+        let mut restored = Params::new(1);
+        restored.constant("w", &[2], 0.0).unwrap();
+        let mut optimiser = AdamW::new(&restored, AdamWConfig::default()).unwrap();
+        run.restore(&state, &mut restored, &mut optimiser).unwrap();
+        assert_eq!(values(&restored), [2.0, 2.0], "step 2's weights, not the half-saved step 3's");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
