@@ -270,6 +270,13 @@ fn rest_and_grpc_serve_every_capability() {
         };
         let response = client.post(format!("{base}/v1/ingest")).multipart(upload()).send().await.unwrap();
         refused(response, 401, "unauthorized", "API key").await;
+        // A keyless upload near the body limit gets its refusal, not a connection closed while
+        // it is still being sent.
+        for _ in 0..5 {
+            let big = upload().part("files", file(vec![b' '; 200_000], "padding.bvh"));
+            let response = client.post(format!("{base}/v1/ingest")).multipart(big).send().await.unwrap();
+            refused(response, 401, "unauthorized", "API key").await;
+        }
         let bad = upload().part("files", file(b"HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n".to_vec(), "broken.bvh"));
         let response = client.post(format!("{base}/v1/ingest")).bearer_auth(KEY).multipart(bad).send().await.unwrap();
         refused(response, 400, "bad_bvh", "\"broken.bvh\" is not a valid BVH file: line ").await;

@@ -5,7 +5,9 @@
 use crate::server::error::ApiError;
 use axum::extract::multipart::MultipartError;
 use axum::extract::{FromRequest, Multipart, Request};
+use axum::http::HeaderMap;
 use axum::http::header::CONTENT_TYPE;
+use http_body_util::BodyExt;
 use std::str::FromStr;
 
 /// A part of a form: its bytes and, for an uploaded file, its name.
@@ -32,6 +34,29 @@ fn multipart_error(error: MultipartError, limit: usize) -> ApiError {
 }
 
 impl Form {
+    /// Reads the body as [`Form::read`] does once `check` accepts the request's headers. A
+    /// refused request's body is still read to its end (at most `limit` bytes, dropped as they
+    /// arrive), so a client that is still uploading receives the refusal instead of a connection
+    /// closed under it.
+    pub async fn read_if(
+        request: Request,
+        limit: usize,
+        check: impl FnOnce(&HeaderMap) -> Result<(), ApiError>,
+    ) -> Result<Form, ApiError> {
+        if let Err(refusal) = check(request.headers()) {
+            let mut body = request.into_body();
+            let mut read = 0usize;
+            while let Some(Ok(frame)) = body.frame().await {
+                read += frame.data_ref().map_or(0, |data| data.len());
+                if read > limit {
+                    break;
+                }
+            }
+            return Err(refusal);
+        }
+        Form::read(request, limit).await
+    }
+
     /// Reads a multipart or JSON body, refusing other content types.
     pub async fn read(request: Request, limit: usize) -> Result<Form, ApiError> {
         let content_type =

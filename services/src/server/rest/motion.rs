@@ -219,8 +219,8 @@ pub fn answer(generated: Generated, json: bool) -> Response {
 )]
 pub async fn generate(State(state): State<Arc<AppState>>, request: Request) -> Result<Response, ApiError> {
     let json = wants_json(request.headers());
-    state.keys.check(Access::Generate, ApiKeys::presented(request.headers()))?;
-    let form = Form::read(request, state.limits.body_bytes).await?;
+    let check = |headers: &HeaderMap| state.keys.check(Access::Generate, ApiKeys::presented(headers));
+    let form = Form::read_if(request, state.limits.body_bytes, check).await?;
     let prompt = form.required_text("prompt")?;
     let seconds = form.number("seconds")?;
     let generated =
@@ -230,8 +230,8 @@ pub async fn generate(State(state): State<Arc<AppState>>, request: Request) -> R
 
 async fn edit_with(state: Arc<AppState>, request: Request, inpaint: bool) -> Result<Response, ApiError> {
     let json = wants_json(request.headers());
-    state.keys.check(Access::Generate, ApiKeys::presented(request.headers()))?;
-    let form = Form::read(request, state.limits.body_bytes).await?;
+    let check = |headers: &HeaderMap| state.keys.check(Access::Generate, ApiKeys::presented(headers));
+    let form = Form::read_if(request, state.limits.body_bytes, check).await?;
     let prompt = form.required_text("prompt")?;
     let required = |name: &str| {
         form.number::<f64>(name)?.ok_or_else(|| ApiError::bad_request(format!("the field {name} is missing")))
