@@ -105,10 +105,13 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     assert!(String::from_utf8_lossy(&other.stderr).contains("another configuration"), "{other:?}");
     // Loss weights and augmentation shape the run, not the model: a continued run may change
     // them, and its card records the new ones.
-    ok(anymo(&models, &strs(&more("10", &["--weight", "rotation=2", "--rebase", "0.25"]))).output().unwrap());
+    ok(anymo(&models, &strs(&more("10", &["--weight", "rotation=2", "--weight", "heading=1", "--rebase", "0.25"])))
+        .output()
+        .unwrap());
     let card: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("ck/straight.json")).unwrap()).unwrap();
     assert_eq!(card["config"]["tokenizer"]["weights"]["rotation"].as_f64(), Some(2.0), "{card}");
+    assert_eq!(card["config"]["tokenizer"]["weights"]["heading"].as_f64(), Some(1.0), "{card}");
     assert_eq!(card["config"]["training"]["rebase"].as_f64(), Some(0.25), "{card}");
     assert_eq!(card["config"]["training"]["start"].as_u64(), Some(8));
 

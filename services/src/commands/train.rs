@@ -180,7 +180,8 @@ struct TokenizerArgs {
     #[arg(long)]
     continue_shipped: bool,
     /// A loss term's weight, as NAME=VALUE (repeatable). The terms: rotation, root, position,
-    /// velocity, contact, skating, commitment; the others keep their defaults.
+    /// velocity, contact, skating, commitment, heading and path (the root's heading and path
+    /// integrated over each window; off by default); the others keep their defaults.
     #[arg(long = "weight", value_name = "NAME=VALUE", value_parser = parse_weight)]
     weights: Vec<(String, f32)>,
     /// Probability of rebasing a window's rest pose on one of its frames (NEC C.1).

@@ -60,7 +60,12 @@ impl RunDir {
 
     /// Restores parameters and optimiser from the save that `state` records; returns the saved
     /// buffers.
-    pub fn restore(&self, state: &RunState, params: &mut Params, optimiser: &mut AdamW) -> Result<HashMap<String, Tensor>> {
+    pub fn restore(
+        &self,
+        state: &RunState,
+        params: &mut Params,
+        optimiser: &mut AdamW,
+    ) -> Result<HashMap<String, Tensor>> {
         let dir = state.saved_in.as_ref().map_or_else(|| self.dir.clone(), |sub| self.dir.join(sub));
         let rest = params.load(&dir.join("params.safetensors")).context("loading the run's parameters")?;
         optimiser.load(&dir.join("optimiser.safetensors")).context("loading the run's optimiser state")?;
@@ -214,6 +219,8 @@ impl Running {
         mix(&mut self.parts.root, p.root);
         mix(&mut self.parts.velocity, p.velocity);
         mix(&mut self.parts.commitment, p.commitment);
+        mix(&mut self.parts.heading, p.heading);
+        mix(&mut self.parts.path, p.path);
         self.n += 1.0;
     }
 }
@@ -277,8 +284,8 @@ pub fn train_codec(
             let fps = frames as f64 / window_start.elapsed().as_secs_f64();
             let r = &running.parts;
             let message = format!(
-                "rot {:.4} pos {:.5} root {:.3} vel {:.6} commit {:.4} | {fps:.0} frames/s",
-                r.rotation, r.position, r.root, r.velocity, r.commitment
+                "rot {:.4} pos {:.5} root {:.3} heading {:.4} path {:.4} vel {:.6} commit {:.4} | {fps:.0} frames/s",
+                r.rotation, r.position, r.root, r.heading, r.path, r.velocity, r.commitment
             );
             log.maybe(state.step, settings.steps, &message);
             bar.set_message(message);

@@ -145,13 +145,21 @@ pub struct LossWeights {
     pub skating: f32,
     /// RVQ commitment.
     pub commitment: f32,
+    /// Heading integrated from the yaw rate over the window (cards that do not record it were
+    /// trained without it).
+    #[serde(default)]
+    pub heading: f32,
+    /// Root path integrated from heading and planar velocity over the window (likewise).
+    #[serde(default)]
+    pub path: f32,
 }
 
 impl Default for LossWeights {
     /// Rotation, root and position weights are the ones that measured best when the shipped TAT
     /// was continued (README, "What the recipe changed"): positions cannot see a bone's twist
     /// about its own axis, so only the rotation term pins it, and the root features carry the
-    /// heading that long clips integrate.
+    /// heading that long clips integrate. The heading and path terms are off: continuing the
+    /// shipped TAT with them made the integrated heading worse, not better (README, probes).
     fn default() -> Self {
         LossWeights {
             rotation: 10.0,
@@ -161,6 +169,8 @@ impl Default for LossWeights {
             contact: 0.1,
             skating: 20.0,
             commitment: 0.02,
+            heading: 0.0,
+            path: 0.0,
         }
     }
 }
@@ -182,6 +192,10 @@ pub struct LossParts {
     pub skating: f32,
     /// Commitment.
     pub commitment: f32,
+    /// Integrated heading mean squared error (radians²).
+    pub heading: f32,
+    /// Integrated root path mean squared error (diameters²).
+    pub path: f32,
 }
 
 fn masked_mean(err: &Tensor, mask: &Tensor) -> Result<Tensor> {
@@ -191,6 +205,23 @@ fn masked_mean(err: &Tensor, mask: &Tensor) -> Result<Tensor> {
         mask.reshape(mask.dims().iter().copied().chain(std::iter::repeat_n(1, err.rank() - 2)).collect::<Vec<_>>())?;
     let total = err.broadcast_mul(&m)?.sum_all()?;
     total / (mask.sum_all()?.to_scalar::<f32>()? as f64 * extra as f64).max(1.0)
+}
+
+/// The heading `(B, T)` and planar root path `(B, T, 2)` that raw root features `(B, T, 4)`
+/// integrate to over a window, from heading 0 at the origin, as `features::from_features`
+/// integrates them; frames outside `mask` add nothing.
+pub fn trajectory(root: &Tensor, mask: &Tensor) -> Result<(Tensor, Tensor)> {
+    let t = root.dim(1)?;
+    // `x.matmul(before)[t]` sums x over the frames before t.
+    let before = (Tensor::triu2(t, root.dtype(), root.device())? - Tensor::eye(t, root.dtype(), root.device())?)?;
+    let channel = |k: usize| root.narrow(D::Minus1, k, 1)?.squeeze(D::Minus1)?.mul(mask);
+    let (yaw, vx, vz) = (channel(0)?, channel(1)?, channel(2)?);
+    let heading = yaw.broadcast_matmul(&before)?;
+    let (cos, sin) = (heading.cos()?, heading.sin()?);
+    let dx = ((&vx * &cos)? + (&vz * &sin)?)?;
+    let dz = ((&vz * &cos)? - (&vx * &sin)?)?;
+    let path = Tensor::stack(&[dx.broadcast_matmul(&before)?, dz.broadcast_matmul(&before)?], D::Minus1)?;
+    Ok((heading, path))
 }
 
 /// The weighted loss of a prediction, and its terms.
@@ -220,13 +251,19 @@ pub fn loss(
         }
         None => Tensor::new(0f32, &Device::Cpu)?,
     };
+    let (heading_true, path_true) = trajectory(&stats.denormalise(&truth.root)?, mask)?;
+    let (heading_pred, path_pred) = trajectory(&stats.denormalise(&prediction.root)?, mask)?;
+    let heading = masked_mean(&(heading_pred - heading_true)?.sqr()?, mask)?;
+    let path = masked_mean(&(path_pred - path_true)?.sqr()?.sum(D::Minus1)?, mask)?;
     let total = ((&rotation * w.rotation as f64)?
         + (&root * w.root as f64)?
         + (&position * w.position as f64)?
         + (&velocity * w.velocity as f64)?
         + (&contact * w.contact as f64)?
         + (&skating * w.skating as f64)?
-        + (commitment * w.commitment as f64)?)?;
+        + (commitment * w.commitment as f64)?
+        + (&heading * w.heading as f64)?
+        + (&path * w.path as f64)?)?;
     let v = |t: &Tensor| t.to_scalar::<f32>();
     let parts = LossParts {
         rotation: v(&rotation)?,
@@ -236,6 +273,32 @@ pub fn loss(
         contact: v(&contact)?,
         skating: v(&skating)?,
         commitment: v(commitment)?,
+        heading: v(&heading)?,
+        path: v(&path)?,
     };
     Ok((total, parts))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f32::consts::FRAC_PI_2;
+
+    #[test]
+    fn trajectory_integrates_turns_and_steps_like_the_features_do() {
+        // A quarter turn and one unit forward (+Z of the heading frame) per frame; the last frame
+        // is padding, whose rates must not count.
+        let rows = [[FRAC_PI_2, 0.0, 1.0, 0.5]; 4];
+        let root = Tensor::new(&rows, &Device::Cpu).unwrap().unsqueeze(0).unwrap();
+        let mask = Tensor::new(&[[1f32, 1.0, 1.0, 0.0]], &Device::Cpu).unwrap();
+        let (heading, path) = trajectory(&root, &mask).unwrap();
+        let heading: Vec<f32> = heading.flatten_all().unwrap().to_vec1().unwrap();
+        let path: Vec<f32> = path.flatten_all().unwrap().to_vec1().unwrap();
+        let expected_heading = [0.0, FRAC_PI_2, 2.0 * FRAC_PI_2, 3.0 * FRAC_PI_2];
+        // Facing +Z, then +X, then -Z: (x, z) per frame.
+        let expected_path = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0];
+        for (got, want) in heading.iter().zip(expected_heading).chain(path.iter().zip(expected_path)) {
+            assert!((got - want).abs() < 1e-5, "{heading:?} {path:?}");
+        }
+    }
 }
