@@ -132,6 +132,14 @@ mod tests {
     use std::sync::atomic::AtomicBool;
     use std::sync::mpsc::channel;
 
+    /// Yields until `condition` holds: the workers are threads, so the test waits on what they
+    /// report rather than on a guess at how long they take.
+    async fn until(condition: impl Fn() -> bool) {
+        while !condition() {
+            tokio::task::yield_now().await;
+        }
+    }
+
     /// A worker whose model blocks each task until the test releases it.
     fn gated() -> (Engine<Receiver<()>>, std::sync::mpsc::Sender<()>) {
         let (release, gate) = channel();
@@ -147,14 +155,12 @@ mod tests {
             async move { engine.run(long, |gate| Ok(gate.recv().is_ok())).await }
         });
         // The worker takes the first task off the queue and blocks on it.
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        until(|| engine.active() == 1).await;
         let queued = tokio::spawn({
             let engine = engine.clone();
             async move { engine.run(long, |gate| Ok(gate.recv().is_ok())).await }
         });
-        while engine.waiting() == 0 {
-            tokio::task::yield_now().await;
-        }
+        until(|| engine.waiting() == 1).await;
         let refused = engine.run(long, |_| Ok(true)).await.unwrap_err();
         assert_eq!((refused.code, refused.retry_after), ("busy", Some(1)));
         assert!(refused.message.contains("(1 waiting)"), "{}", refused.message);
@@ -172,7 +178,7 @@ mod tests {
             let engine = engine.clone();
             async move { engine.run(Duration::from_secs(30), |gate| Ok(gate.recv().is_ok())).await }
         });
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        until(|| engine.active() == 1).await;
         let ran = Arc::new(AtomicBool::new(false));
         let flag = ran.clone();
         let late = engine
@@ -184,7 +190,9 @@ mod tests {
         assert_eq!(late.unwrap_err().code, "timeout");
         release.send(()).unwrap();
         assert!(blocker.await.unwrap().unwrap());
-        // The worker has taken the expired task off the queue by the time it answers the next.
+        // The blocker answers before its worker takes the expired task off the one-place queue;
+        // once it has, the next task queues behind it and is answered after it.
+        until(|| engine.waiting() == 0).await;
         engine.run(Duration::from_secs(30), |_| Ok(())).await.unwrap();
         assert!(!ran.load(Ordering::SeqCst), "a task whose client gave up is dropped unrun");
     }

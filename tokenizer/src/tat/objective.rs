@@ -255,15 +255,20 @@ pub fn loss(
     let (heading_pred, path_pred) = trajectory(&stats.denormalise(&prediction.root)?, mask)?;
     let heading = masked_mean(&(heading_pred - heading_true)?.sqr()?, mask)?;
     let path = masked_mean(&(path_pred - path_true)?.sqr()?.sum(D::Minus1)?, mask)?;
-    let total = ((&rotation * w.rotation as f64)?
+    let mut total = ((&rotation * w.rotation as f64)?
         + (&root * w.root as f64)?
         + (&position * w.position as f64)?
         + (&velocity * w.velocity as f64)?
         + (&contact * w.contact as f64)?
         + (&skating * w.skating as f64)?
-        + (commitment * w.commitment as f64)?
-        + (&heading * w.heading as f64)?
-        + (&path * w.path as f64)?)?;
+        + (commitment * w.commitment as f64)?)?;
+    // Off by default: left out of the total then, so the backward pass does not go through them
+    // (they are still logged).
+    for (term, weight) in [(&heading, w.heading), (&path, w.path)] {
+        if weight > 0.0 {
+            total = (total + (term * weight as f64)?)?;
+        }
+    }
     let v = |t: &Tensor| t.to_scalar::<f32>();
     let parts = LossParts {
         rotation: v(&rotation)?,
@@ -286,17 +291,18 @@ mod tests {
 
     #[test]
     fn trajectory_integrates_turns_and_steps_like_the_features_do() {
-        // A quarter turn and one unit forward (+Z of the heading frame) per frame; the last frame
-        // is padding, whose rates must not count.
-        let rows = [[FRAC_PI_2, 0.0, 1.0, 0.5]; 4];
+        // A quarter turn and one unit forward (+Z of the heading frame) per frame; the last two
+        // frames are padding, so the last frame must not move on from the one before it.
+        let rows = [[FRAC_PI_2, 0.0, 1.0, 0.5]; 5];
         let root = Tensor::new(&rows, &Device::Cpu).unwrap().unsqueeze(0).unwrap();
-        let mask = Tensor::new(&[[1f32, 1.0, 1.0, 0.0]], &Device::Cpu).unwrap();
+        let mask = Tensor::new(&[[1f32, 1.0, 1.0, 0.0, 0.0]], &Device::Cpu).unwrap();
         let (heading, path) = trajectory(&root, &mask).unwrap();
         let heading: Vec<f32> = heading.flatten_all().unwrap().to_vec1().unwrap();
         let path: Vec<f32> = path.flatten_all().unwrap().to_vec1().unwrap();
-        let expected_heading = [0.0, FRAC_PI_2, 2.0 * FRAC_PI_2, 3.0 * FRAC_PI_2];
-        // Facing +Z, then +X, then -Z: (x, z) per frame.
-        let expected_path = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0];
+        let expected_heading = [0.0, FRAC_PI_2, 2.0 * FRAC_PI_2, 3.0 * FRAC_PI_2, 3.0 * FRAC_PI_2];
+        // Facing +Z, then +X, then -Z: (x, z) per frame; padding adds nothing.
+        let expected_path = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0.0];
+        assert_eq!((heading.len(), path.len()), (5, 10));
         for (got, want) in heading.iter().zip(expected_heading).chain(path.iter().zip(expected_path)) {
             assert!((got - want).abs() < 1e-5, "{heading:?} {path:?}");
         }
