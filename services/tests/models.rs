@@ -8,6 +8,7 @@ use anymo_tests::{
     data_dir, gunzip, models_dir, safetensors_values as tensors, scratch_dir, succeeded as ok, wait_for_saved_step,
 };
 use anymo_tokenizer::bvh::{self, ReadOptions};
+use anymo_tokenizer::motion::Motion;
 use std::path::Path;
 use std::process::Command;
 
@@ -152,13 +153,14 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
         }
     }
     // The static reference keeps the true root, so its MPJPE with translation is its
-    // root-aligned one, and it moves no joint, so it has an error.
+    // root-aligned one, anchors change nothing for it, and it moves no joint, so it has an error.
     for split in ["test", "zero-shot"] {
         let m = &results["static pose (reference)"][split];
         assert_eq!(m["clips"], 3, "{split}");
         let (plain, trans, yaw) =
             (m["mpjpe"].as_f64().unwrap(), m["mpjpe_trans"].as_f64().unwrap(), m["mpjpe_yaw"].as_f64().unwrap());
         assert!(plain > 0.0 && (plain - trans).abs() < 1e-6, "{split}: {plain} {trans}");
+        assert!((plain - m["mpjpe_free"].as_f64().unwrap()).abs() < 1e-9, "{split}: {m}");
         assert!(yaw.is_finite() && yaw > 0.0, "{split}: {yaw}");
     }
 
@@ -201,6 +203,22 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     ok(anymo(&models, &strs(&detok)).output().unwrap());
     assert_eq!(hierarchy(&back), hierarchy(&source));
     assert_eq!(bvh::read_path(&back, ReadOptions::default()).unwrap().frames(), frames);
+    // The root is anchored at every window start and the last frame: there the decoded root
+    // stands where the source's does, although six training steps decode little else.
+    let anchored: Vec<usize> =
+        file["tokens"]["anchors"].as_array().unwrap().iter().map(|a| a["frame"].as_u64().unwrap() as usize).collect();
+    let mut expected: Vec<usize> =
+        file["tokens"]["starts"].as_array().unwrap().iter().map(|s| s.as_u64().unwrap() as usize).collect();
+    expected.push(frames - 1);
+    assert_eq!(anchored, expected);
+    let read = |path: &Path| Motion::from_bvh(&bvh::read_path(path, ReadOptions::default()).unwrap());
+    let (src, out) = (read(&source), read(&back));
+    assert_eq!(src.frames(), frames, "the source is at the model's frame rate");
+    let tolerance = 1e-3 * src.skeleton().diameter();
+    for &f in &anchored {
+        let (a, b) = (src.translations(f)[0], out.translations(f)[0]);
+        assert!((a.x - b.x).hypot(a.z - b.z) < tolerance, "frame {f}: root at {b} against {a}");
+    }
     let moved = dir.join("walk.horse.bvh");
     let transfer = with(
         vec![
@@ -216,8 +234,16 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     ok(anymo(&models, &strs(&transfer)).output().unwrap());
     assert_eq!(hierarchy(&moved), hierarchy(&horse));
 
-    // Tokens that do not fit the checkpoint are refused with a reason.
-    std::fs::write(&tokens, std::fs::read_to_string(&tokens).unwrap().replacen("[[[", "[[[99999,", 1)).unwrap();
+    // Tokens that do not fit the checkpoint are refused with a reason, and so are anchors
+    // outside the clip.
+    let written = std::fs::read_to_string(&tokens).unwrap();
+    let last = format!("\"frame\":{}", frames - 1);
+    assert!(written.contains(&last), "the last anchor is written as {last}");
+    std::fs::write(&tokens, written.replacen(&last, &format!("\"frame\":{frames}"), 1)).unwrap();
+    let refused = anymo(&models, &strs(&detok)).output().unwrap();
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("root anchors must lie inside the clip"));
+    std::fs::write(&tokens, written.replacen("[[[", "[[[99999,", 1)).unwrap();
     let refused = anymo(&models, &strs(&detok)).output().unwrap();
     assert!(!refused.status.success());
     assert!(String::from_utf8_lossy(&refused.stderr).contains("do not fit checkpoint"));

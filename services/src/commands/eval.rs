@@ -214,10 +214,10 @@ impl Default for Tables {
     fn default() -> Self {
         Tables {
             table: String::from(
-                "| model | split | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (with trans) | GeoDist (deg) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+                "| model | split | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (free root) | MPJPE (with trans) | GeoDist (deg) | GeoDist (free root) | FS | GP | FS (GT) | GP (GT) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             ),
             per_source: String::from(
-                "| model | split | source | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (with trans) | GeoDist (deg) |\n|---|---|---|---|---|---|---|---|\n",
+                "| model | split | source | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (free root) | MPJPE (with trans) | GeoDist (deg) | GeoDist (free root) |\n|---|---|---|---|---|---|---|---|---|---|\n",
             ),
         }
     }
@@ -236,24 +236,28 @@ impl Tables {
             by_split.entry(split.clone()).or_default().merge(sums);
             let s = sums.scores();
             self.per_source.push_str(&format!(
-                "| {name} | {split} | {source} | {} | {} | {} | {} | {:.2} |\n",
+                "| {name} | {split} | {source} | {} | {} | {} | {} | {} | {:.2} | {:.2} |\n",
                 s.clips,
                 f(s.mpjpe),
                 f(s.mpjpe_yaw),
+                f(s.mpjpe_free),
                 f(s.mpjpe_trans),
-                s.geodist
+                s.geodist,
+                s.geodist_free
             ));
             model_json.insert(format!("{split}/{source}"), serde_json::to_value(s)?);
         }
         for (split, sums) in &by_split {
             let s = sums.scores();
             self.table.push_str(&format!(
-                "| {name} | {split} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} |\n",
+                "| {name} | {split} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {} | {} | {} | {} |\n",
                 s.clips,
                 f(s.mpjpe),
                 f(s.mpjpe_yaw),
+                f(s.mpjpe_free),
                 f(s.mpjpe_trans),
                 s.geodist,
+                s.geodist_free,
                 f(s.fs),
                 f(s.gp),
                 f(s.fs_truth),
@@ -263,7 +267,7 @@ impl Tables {
         }
         if rec.refused > 0 {
             self.table.push_str(&format!(
-                "| {name} | refused | {} | (skeleton larger than the model takes) | | | | | | | |\n",
+                "| {name} | refused | {} | (skeleton larger than the model takes) | | | | | | | | | |\n",
                 rec.refused
             ));
             model_json.insert("refused".into(), rec.refused.into());

@@ -32,7 +32,9 @@ pub struct Sums {
     mpjpe: f64,
     mpjpe_trans: f64,
     mpjpe_yaw: f64,
+    mpjpe_free: f64,
     geodist: f64,
+    geodist_free: f64,
     fs: f64,
     gp: f64,
     fs_truth: f64,
@@ -53,8 +55,15 @@ pub struct Scores {
     /// MPJPE with the root's position and the best turn about +Y aligned per frame: the pose
     /// alone, without the heading error that builds up over a long clip.
     pub mpjpe_yaw: f64,
+    /// Root-aligned MPJPE with the root integrated from the decoded rates alone (no anchors), as
+    /// generated tokens decode: the heading error builds up over the clip.
+    #[serde(default)]
+    pub mpjpe_free: f64,
     /// Mean geodesic distance of local rotations, degrees.
     pub geodist: f64,
+    /// GeoDist without anchors (the root joint's rotation carries the heading).
+    #[serde(default)]
+    pub geodist_free: f64,
     /// Foot skating of the reconstruction, diameters per second.
     pub fs: f64,
     /// Ground penetration of the reconstruction, diameters.
@@ -66,8 +75,8 @@ pub struct Scores {
 }
 
 impl Sums {
-    /// Adds one clip's truth and reconstruction.
-    pub fn add(&mut self, truth: &Motion, rebuilt: &Motion) {
+    /// Adds one clip's truth and reconstruction, with the root anchored and free.
+    pub fn add(&mut self, truth: &Motion, rebuilt: &Motion, free: &Motion) {
         let n = truth.skeleton().len();
         let frames = truth.frames();
         let (pt, pr) = (all_joint_positions(truth), all_joint_positions(rebuilt));
@@ -79,7 +88,9 @@ impl Sums {
         self.mpjpe += w * mpjpe_root_aligned(&pr, &pt, n) as f64;
         self.mpjpe_trans += w * mpjpe(&pr, &pt) as f64;
         self.mpjpe_yaw += w * mpjpe_yaw_aligned(&pr, &pt, n) as f64;
+        self.mpjpe_free += w * mpjpe_root_aligned(&all_joint_positions(free), &pt, n) as f64;
         self.geodist += w * geodesic_distance_deg(rebuilt.all_rotations(), truth.all_rotations()) as f64;
+        self.geodist_free += w * geodesic_distance_deg(free.all_rotations(), truth.all_rotations()) as f64;
         self.fs += w * foot_skating(&pr, n, &feet, fps, CONTACT_HEIGHT) as f64;
         self.gp += w * ground_penetration(&pr) as f64;
         self.fs_truth += w * foot_skating(&pt, n, &feet, fps, CONTACT_HEIGHT) as f64;
@@ -93,7 +104,9 @@ impl Sums {
         self.mpjpe += o.mpjpe;
         self.mpjpe_trans += o.mpjpe_trans;
         self.mpjpe_yaw += o.mpjpe_yaw;
+        self.mpjpe_free += o.mpjpe_free;
         self.geodist += o.geodist;
+        self.geodist_free += o.geodist_free;
         self.fs += o.fs;
         self.gp += o.gp;
         self.fs_truth += o.fs_truth;
@@ -109,7 +122,9 @@ impl Sums {
             mpjpe: self.mpjpe / w,
             mpjpe_trans: self.mpjpe_trans / w,
             mpjpe_yaw: self.mpjpe_yaw / w,
+            mpjpe_free: self.mpjpe_free / w,
             geodist: self.geodist / w,
+            geodist_free: self.geodist_free / w,
             fs: self.fs / w,
             gp: self.gp / w,
             fs_truth: self.fs_truth / w,
@@ -139,11 +154,11 @@ pub fn reconstruction(
     for clip in clips {
         let graph = graphs.of(clip.motion.skeleton())?;
         match reconstruct(codec, &graph, &clip.motion, window, overlap) {
-            Ok((truth, rebuilt)) => out
-                .groups
-                .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
-                .or_default()
-                .add(&truth, &rebuilt),
+            Ok(r) => out.groups.entry((clip.split.as_str().to_string(), clip.item.source.clone())).or_default().add(
+                &r.truth,
+                &r.anchored,
+                &r.free,
+            ),
             Err(_) => out.refused += 1,
         }
     }
@@ -178,10 +193,11 @@ pub fn static_reference(clips: &[&ModelClip]) -> Reconstruction {
     let mut out = Reconstruction::default();
     for clip in clips {
         let truth = canonicalise(&clip.motion);
+        let still = static_pose(&truth);
         out.groups
             .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
             .or_default()
-            .add(&truth, &static_pose(&truth));
+            .add(&truth, &still, &still);
     }
     out
 }

@@ -9,8 +9,8 @@ use anyhow::Result;
 use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::prep::clean::{CleanOptions, clean};
 use anymo_tokenizer::skeleton::Skeleton;
-use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
+use anymo_tokenizer::tat::{Tat, anchor};
 use anymo_tokenizer::text::{CachedEncoder, SentenceEncoder};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -64,7 +64,8 @@ impl TokenCodec {
 
     /// Why tokens (perhaps from a client) cannot be decoded by this checkpoint, if they cannot:
     /// the codes must fit its codebooks, every window must hold the same whole number of steps
-    /// and cover the window, and the windows must start inside the clip, in order, covering it.
+    /// and cover the window, the windows must start inside the clip, in order, covering it, and
+    /// the root anchors must lie inside it, in order.
     fn check(&self, tokens: &Tokens) -> Result<(), String> {
         let (layers, codes) = (self.tat.config().rvq.layers, self.tat.config().rvq.codes as u32);
         let per_token = self.tat.config().tat.frames_per_token();
@@ -97,7 +98,7 @@ impl TokenCodec {
         if !(tokens.fps > 0.0 && tokens.fps <= 1000.0 && tokens.start.iter().all(|v| v.is_finite())) {
             return Err("fps must be in (0, 1000] and the start finite".into());
         }
-        Ok(())
+        anchor::check(&tokens.anchors, tokens.frames)
     }
 
     /// A clip moved onto `skeleton` through tokens.

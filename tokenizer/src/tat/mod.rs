@@ -2,6 +2,7 @@
 //! a sequence of residual-VQ tokens that carry no skeleton, and tokens become motion on any
 //! skeleton. Also the zero-padded RVQ-VAE baseline it is measured against.
 
+pub mod anchor;
 pub mod codec;
 pub mod fk;
 pub mod model;

@@ -1,6 +1,7 @@
 //! Clips of any length through fixed-size windows (SATA B.1): windows of `window` frames that
 //! share `overlap` frames with the next, decoded and cross-faded over the shared frames.
 
+use super::anchor::{self, RootAnchor, anchor_frames};
 use super::codec::Codec;
 use super::objective::Prepared;
 use crate::dataset::Batch;
@@ -95,15 +96,26 @@ pub fn blend(
     MotionFeatures { frames, joints, root: rt, rotations: rot }
 }
 
+/// A clip through a codec, with the canonicalised truth it is measured against.
+pub struct Reconstructed {
+    /// The canonicalised clip.
+    pub truth: Motion,
+    /// The reconstruction with the root pinned to the truth's anchors at every window start, as
+    /// [`tokenize`] and [`detokenize`] deliver it.
+    pub anchored: Motion,
+    /// The reconstruction with the root integrated from the decoded rates alone, as generated
+    /// tokens (which carry no anchors) decode.
+    pub free: Motion,
+}
+
 /// A clip through a codec: canonicalised, windowed, encoded, quantised, decoded and blended.
-/// Returns the canonicalised truth and the reconstruction on the same skeleton.
 pub fn reconstruct(
     codec: &mut dyn Codec,
     graph: &SkeletonGraph,
     motion: &Motion,
     window: usize,
     overlap: usize,
-) -> Result<(Motion, Motion)> {
+) -> Result<Reconstructed> {
     let truth = canonicalise(motion);
     let (features, start) = to_features(&truth);
     let starts = window_starts(features.frames, window, overlap);
@@ -111,7 +123,7 @@ pub fn reconstruct(
     let prepared = Prepared::new(&batch, codec.root_stats())?;
     let out = codec.reconstruct(&prepared, graph, false, &mut rand_chacha::ChaCha8Rng::seed_from_u64(0))?;
     let root = codec.root_stats().denormalise(&out.prediction.root)?;
-    let decoded = blend(
+    let mut decoded = blend(
         &out.prediction.rotations.flatten_all()?.to_vec1()?,
         &root.flatten_all()?.to_vec1()?,
         features.joints,
@@ -119,8 +131,10 @@ pub fn reconstruct(
         window,
         features.frames,
     );
-    let rebuilt = from_features(&decoded, start, truth.skeleton(), truth.frame_time());
-    Ok((truth, rebuilt))
+    let free = from_features(&decoded, start, truth.skeleton(), truth.frame_time());
+    anchor::pin(&mut decoded, &anchor::measure(&features, &anchor_frames(&starts, features.frames)));
+    let anchored = from_features(&decoded, start, truth.skeleton(), truth.frame_time());
+    Ok(Reconstructed { truth, anchored, free })
 }
 
 /// A clip as tokens: per window, per token step, one code per RVQ layer.
@@ -138,6 +152,10 @@ pub struct Tokens {
     pub start: [f32; 3],
     /// `windows x steps x layers` codes.
     pub codes: Vec<Vec<Vec<u32>>>,
+    /// The root at each window's first frame and the clip's last frame, which decoding holds the
+    /// root to (none for generated tokens: their root runs free).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub anchors: Vec<RootAnchor>,
 }
 
 impl Tokens {
@@ -159,6 +177,7 @@ pub fn tokenize(tat: &mut super::Tat, graph: &SkeletonGraph, motion: &Motion) ->
     let condition = tat.condition(graph, &prepared.offsets)?;
     let codes = tat.encode(&prepared.input, &condition)?;
     let steps = codes.len() / starts.len();
+    let anchors = anchor::measure(&features, &anchor_frames(&starts, features.frames));
     Ok(Tokens {
         frames: features.frames,
         fps: motion.fps(),
@@ -166,6 +185,7 @@ pub fn tokenize(tat: &mut super::Tat, graph: &SkeletonGraph, motion: &Motion) ->
         starts,
         start: [original_start.heading, original_start.planar[0], original_start.planar[1]],
         codes: codes.chunks(steps).map(|c| c.to_vec()).collect(),
+        anchors,
     })
 }
 
@@ -198,6 +218,7 @@ pub fn encode_whole(tat: &mut super::Tat, graph: &SkeletonGraph, motion: &Motion
             starts: vec![0],
             start: [original_start.heading, original_start.planar[0], original_start.planar[1]],
             codes: vec![codes],
+            anchors: Vec::new(),
         },
         latent: latent.flatten_all()?.to_vec1()?,
     })
@@ -207,12 +228,19 @@ impl Tokens {
     /// Tokens of one window of generated codes (`steps x layers`), starting at the origin.
     pub fn whole(codes: Vec<Vec<u32>>, frames_per_token: usize, fps: f64) -> Tokens {
         let frames = codes.len() * frames_per_token;
-        Tokens { frames, fps, window: frames, starts: vec![0], start: [0.0; 3], codes: vec![codes] }
+        Tokens {
+            frames,
+            fps,
+            window: frames,
+            starts: vec![0],
+            start: [0.0; 3],
+            codes: vec![codes],
+            anchors: Vec::new(),
+        }
     }
 }
 
-/// Decodes tokens onto a cleaned skeleton (diameter 1); the root path is scaled by `scale`
-/// (the target's size relative to the source's, 1 for the same skeleton).
+/// Decodes tokens onto a cleaned skeleton (diameter 1), the root held to the tokens' anchors.
 pub fn detokenize(tat: &super::Tat, tokens: &Tokens, graph: &SkeletonGraph, skeleton: &Skeleton) -> Result<Motion> {
     let windows = tokens.codes.len();
     let j = skeleton.len();
@@ -223,7 +251,7 @@ pub fn detokenize(tat: &super::Tat, tokens: &Tokens, graph: &SkeletonGraph, skel
     let flat: Vec<Vec<u32>> = tokens.codes.iter().flatten().cloned().collect();
     let prediction = tat.decode(&flat, windows, &condition)?;
     let root = tat.config().root.denormalise(&prediction.root)?;
-    let decoded = blend(
+    let mut decoded = blend(
         &prediction.rotations.flatten_all()?.to_vec1()?,
         &root.flatten_all()?.to_vec1()?,
         j,
@@ -231,6 +259,7 @@ pub fn detokenize(tat: &super::Tat, tokens: &Tokens, graph: &SkeletonGraph, skel
         tokens.window,
         tokens.frames,
     );
+    anchor::pin(&mut decoded, &tokens.anchors);
     Ok(from_features(&decoded, tokens.start(), skeleton, 1.0 / tokens.fps))
 }
 
@@ -244,6 +273,15 @@ mod tests {
         assert_eq!(window_starts(64, 64, 16), vec![0]);
         assert_eq!(window_starts(112, 64, 16), vec![0, 48]);
         assert_eq!(window_starts(130, 64, 16), vec![0, 48, 66]);
+    }
+
+    #[test]
+    fn tokens_written_before_anchors_still_read_and_decode_free() {
+        let old = r#"{"frames":20,"fps":30.0,"window":20,"starts":[0],"start":[0.5,1.0,2.0],"codes":[[[1,2]]]}"#;
+        let tokens: Tokens = serde_json::from_str(old).unwrap();
+        assert!(tokens.anchors.is_empty());
+        assert_eq!(tokens.start(), Start { heading: 0.5, planar: [1.0, 2.0] });
+        assert!(!serde_json::to_string(&tokens).unwrap().contains("anchors"), "no anchors, no field");
     }
 
     #[test]
