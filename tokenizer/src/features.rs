@@ -80,6 +80,20 @@ pub fn to_features(motion: &Motion) -> (MotionFeatures, Start) {
     (MotionFeatures { frames, joints, root, rotations }, start)
 }
 
+/// The root's heading and planar position at each frame, integrated from the features' rates
+/// from heading 0 at the origin in frame 0.
+pub fn root_path(features: &MotionFeatures) -> Vec<(f32, Vec3)> {
+    let mut out = Vec::with_capacity(features.frames);
+    let (mut heading, mut planar) = (0f32, Vec3::ZERO);
+    for f in 0..features.frames {
+        out.push((heading, planar));
+        let r = &features.root[f * ROOT_DIMS..(f + 1) * ROOT_DIMS];
+        planar += Quat::from_rotation_y(heading) * Vec3::new(r[1], 0.0, r[2]);
+        heading += r[0];
+    }
+    out
+}
+
 /// Rebuilds a motion on `skeleton` from features (exact up to float for features of a real
 /// motion; the nearest rotations for a model's raw 6D output).
 pub fn from_features(features: &MotionFeatures, start: Start, skeleton: &Skeleton, frame_time: f64) -> Motion {
@@ -87,25 +101,24 @@ pub fn from_features(features: &MotionFeatures, start: Start, skeleton: &Skeleto
     assert_eq!(joints, skeleton.len(), "features are for a skeleton with {joints} joints");
     let mut rotations = Vec::with_capacity(frames * joints);
     let mut translations = Vec::with_capacity(frames * joints);
-    let mut heading = start.heading;
-    let mut planar = Vec3::new(start.planar[0], 0.0, start.planar[1]);
-    for f in 0..frames {
-        let r = &features.root[f * ROOT_DIMS..(f + 1) * ROOT_DIMS];
-        let heading_q = Quat::from_rotation_y(heading);
+    let start_turn = Quat::from_rotation_y(start.heading);
+    let origin = Vec3::new(start.planar[0], 0.0, start.planar[1]);
+    for (f, (heading, planar)) in root_path(features).into_iter().enumerate() {
+        let height = features.root[f * ROOT_DIMS + 3];
+        let heading_q = Quat::from_rotation_y(start.heading + heading);
+        let planar = origin + start_turn * planar;
         for j in 0..joints {
             let k = (f * joints + j) * ROT_DIMS;
             let six: [f32; 6] = features.rotations[k..k + ROT_DIMS].try_into().expect("six values");
             let local = rot6d_to_quat(six);
             if j == 0 {
                 rotations.push((heading_q * local).normalize());
-                translations.push(Vec3::new(planar.x, r[3], planar.z));
+                translations.push(Vec3::new(planar.x, height, planar.z));
             } else {
                 rotations.push(local);
                 translations.push(skeleton.joint(j).offset);
             }
         }
-        planar += heading_q * Vec3::new(r[1], 0.0, r[2]);
-        heading += r[0];
     }
     Motion::new(skeleton.clone(), frame_time, rotations, translations).expect("shapes match")
 }

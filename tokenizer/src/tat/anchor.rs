@@ -6,7 +6,7 @@
 //! facing the wrong way although every pose is right. Three numbers per window (the heading and
 //! planar position at its first frame) bound that error to one window, at no cost to the codes.
 
-use crate::features::{MotionFeatures, ROOT_DIMS};
+use crate::features::{MotionFeatures, ROOT_DIMS, root_path};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -34,23 +34,9 @@ pub fn anchor_frames(starts: &[usize], frames: usize) -> Vec<usize> {
     out
 }
 
-/// Integrates the root's rates up to each frame: `(heading, planar)` per frame, from 0 and the
-/// origin at frame 0.
-fn integrate(features: &MotionFeatures) -> Vec<(f32, Vec3)> {
-    let mut out = Vec::with_capacity(features.frames);
-    let (mut heading, mut planar) = (0f32, Vec3::ZERO);
-    for f in 0..features.frames {
-        out.push((heading, planar));
-        let r = &features.root[f * ROOT_DIMS..(f + 1) * ROOT_DIMS];
-        planar += Quat::from_rotation_y(heading) * Vec3::new(r[1], 0.0, r[2]);
-        heading += r[0];
-    }
-    out
-}
-
 /// Measures the anchors of a clip's features at `frames` (ascending, inside the clip).
 pub fn measure(features: &MotionFeatures, frames: &[usize]) -> Vec<RootAnchor> {
-    let path = integrate(features);
+    let path = root_path(features);
     frames
         .iter()
         .map(|&frame| {
@@ -69,26 +55,22 @@ pub fn pin(features: &mut MotionFeatures, anchors: &[RootAnchor]) {
     for pair in anchors.windows(2) {
         let (a, b) = (pair[0], pair[1]);
         debug_assert!(a.frame < b.frame && b.frame < features.frames, "anchors ascend inside the clip");
-        let len = (b.frame - a.frame) as f32;
-        let yaw = |f: usize| f * ROOT_DIMS;
-        let turned: f32 = (a.frame..b.frame).map(|f| features.root[yaw(f)]).sum();
-        let shift = (b.heading - a.heading - turned) / len;
-        (a.frame..b.frame).for_each(|f| features.root[yaw(f)] += shift);
-        // Headings along the segment, starting from the anchored one.
-        let mut heading = a.heading;
-        let mut moved = Vec3::ZERO;
-        let mut turns = Vec::with_capacity(b.frame - a.frame);
-        for f in a.frame..b.frame {
-            let turn = Quat::from_rotation_y(heading);
-            let r = &features.root[f * ROOT_DIMS..(f + 1) * ROOT_DIMS];
-            moved += turn * Vec3::new(r[1], 0.0, r[2]);
-            turns.push(turn);
-            heading += r[0];
-        }
+        let turned: f32 = (a.frame..b.frame).map(|f| features.root[f * ROOT_DIMS]).sum();
+        let shift = (b.heading - a.heading - turned) / (b.frame - a.frame) as f32;
+        (a.frame..b.frame).for_each(|f| features.root[f * ROOT_DIMS] += shift);
+    }
+    // With the turns right, the headings along the clip are the anchored ones up to the offset
+    // at the first anchor (none when it is frame 0, as for every tokenized clip).
+    let path = root_path(features);
+    let Some(first) = anchors.first() else { return };
+    let offset = first.heading - path[first.frame].0;
+    for pair in anchors.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let moved = Quat::from_rotation_y(offset) * (path[b.frame].1 - path[a.frame].1);
         let wanted = Vec3::new(b.planar[0] - a.planar[0], 0.0, b.planar[1] - a.planar[1]);
-        let step = (wanted - moved) / len;
-        for (f, turn) in (a.frame..b.frame).zip(turns) {
-            let local = turn.inverse() * step;
+        let step = (wanted - moved) / (b.frame - a.frame) as f32;
+        for (f, &(heading, _)) in path.iter().enumerate().take(b.frame).skip(a.frame) {
+            let local = Quat::from_rotation_y(heading + offset).inverse() * step;
             features.root[f * ROOT_DIMS + 1] += local.x;
             features.root[f * ROOT_DIMS + 2] += local.z;
         }
