@@ -162,6 +162,9 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
         assert!(plain > 0.0 && (plain - trans).abs() < 1e-6, "{split}: {plain} {trans}");
         assert!((plain - m["mpjpe_free"].as_f64().unwrap()).abs() < 1e-9, "{split}: {m}");
         assert!(yaw.is_finite() && yaw > 0.0, "{split}: {yaw}");
+        // By joint kind: the true root has no error; the joints held still that move others do.
+        assert!(m["geodist_root"].as_f64().unwrap().abs() < 1e-3, "{split}: {m}");
+        assert!(m["geodist_inner"].as_f64().unwrap() > 0.0, "{split}: {m}");
     }
 
     // Tokens and transfer with the tiny checkpoint: the output keeps the target's hierarchy.

@@ -5,6 +5,7 @@
 //! (see [`crate::prep::clean`]) to get diameter-normalised figures.
 
 use crate::rotation::geodesic_angle;
+use crate::skeleton::Skeleton;
 use glam::{Quat, Vec3};
 
 /// Mean Euclidean distance between corresponding joints over all joints and frames, with the
@@ -47,6 +48,57 @@ pub fn mpjpe_yaw_aligned(predicted: &[Vec3], truth: &[Vec3], joints: usize) -> f
 pub fn geodesic_distance_deg(predicted: &[Quat], truth: &[Quat]) -> f32 {
     assert_eq!(predicted.len(), truth.len(), "same frames and joints");
     mean(predicted.iter().zip(truth).map(|(p, t)| geodesic_angle(*p, *t).to_degrees()))
+}
+
+/// What a joint's rotation moves, to tell apart the GeoDist that positions can see from the
+/// GeoDist only the rotations themselves show.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JointKind {
+    /// The root: its rotation carries the heading.
+    Root,
+    /// A joint whose rotation moves some other joint, so positions constrain it.
+    Inner,
+    /// A joint whose rotation moves no joint: a leaf (its end site is not a joint), or a joint
+    /// whose descendants all sit on it at zero offset.
+    Unseen,
+}
+
+impl JointKind {
+    /// Offsets shorter than this fraction of the diameter count as zero.
+    const ZERO_OFFSET: f32 = 1e-4;
+
+    /// The kind of every joint of `skeleton`, in joint order.
+    pub fn of(skeleton: &Skeleton) -> Vec<JointKind> {
+        let zero = Self::ZERO_OFFSET * skeleton.diameter();
+        let mut moves = vec![false; skeleton.len()];
+        // Parents come before their children, so walking back visits a subtree before its root.
+        for (i, joint) in skeleton.joints().iter().enumerate().skip(1).rev() {
+            let parent = joint.parent.expect("non-root joint has a parent");
+            moves[parent] |= moves[i] || joint.offset.length() > zero;
+        }
+        moves
+            .iter()
+            .enumerate()
+            .map(|(i, &m)| match (i, m) {
+                (0, _) => JointKind::Root,
+                (_, true) => JointKind::Inner,
+                (_, false) => JointKind::Unseen,
+            })
+            .collect()
+    }
+}
+
+/// The summed geodesic angle (degrees) and joint-frame count of each [`JointKind`], in the
+/// order root, inner, unseen, over frame-major `frames x joints` rotations.
+pub fn geodesic_sums_by_kind(predicted: &[Quat], truth: &[Quat], kinds: &[JointKind]) -> [(f64, usize); 3] {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    let mut out = [(0f64, 0usize); 3];
+    for (i, (p, t)) in predicted.iter().zip(truth).enumerate() {
+        let slot = &mut out[kinds[i % kinds.len()] as usize];
+        slot.0 += geodesic_angle(*p, *t).to_degrees() as f64;
+        slot.1 += 1;
+    }
+    out
 }
 
 /// Foot skating: the mean horizontal speed (units per second) of the given foot joints over the
@@ -122,6 +174,40 @@ mod tests {
         let a = [Quat::IDENTITY, Quat::from_rotation_x(0.5)];
         let b = [Quat::from_rotation_y(30f32.to_radians()), Quat::from_rotation_x(0.5)];
         assert!((geodesic_distance_deg(&a, &b) - 15.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn joint_kinds_follow_what_each_rotation_moves() {
+        use crate::skeleton::{Channels, EulerOrder, Joint};
+        let joint = |name: &str, parent: Option<usize>, offset: Vec3| Joint {
+            name: name.into(),
+            parent,
+            offset,
+            channels: Channels::rotation(EulerOrder::Zyx),
+            end_site: None,
+        };
+        // hips -> pelvis (zero offset) -> thigh -> foot (leaf with an end site);
+        // hips -> marker (zero offset, leaf).
+        let mut joints = vec![
+            joint("hips", None, Vec3::ZERO),
+            joint("pelvis", Some(0), Vec3::ZERO),
+            joint("thigh", Some(1), Vec3::new(0.0, -0.4, 0.0)),
+            joint("foot", Some(2), Vec3::new(0.0, -0.4, 0.0)),
+            joint("marker", Some(0), Vec3::ZERO),
+        ];
+        joints[3].end_site = Some(Vec3::new(0.0, 0.0, 0.1));
+        let skeleton = Skeleton::new(joints).unwrap();
+        use JointKind::*;
+        assert_eq!(JointKind::of(&skeleton), [Root, Inner, Inner, Unseen, Unseen]);
+        // Two frames; only the foot (frame 0, 30 degrees) and the marker (frame 1, 90) are off.
+        let truth = vec![Quat::IDENTITY; 10];
+        let mut predicted = truth.clone();
+        predicted[3] = Quat::from_rotation_x(30f32.to_radians());
+        predicted[9] = Quat::from_rotation_y(90f32.to_radians());
+        let sums = geodesic_sums_by_kind(&predicted, &truth, &JointKind::of(&skeleton));
+        assert_eq!([sums[0].1, sums[1].1, sums[2].1], [2, 4, 4]);
+        assert!(sums[0].0.abs() < 1e-4 && sums[1].0.abs() < 1e-4, "{sums:?}");
+        assert!((sums[2].0 - 120.0).abs() < 1e-3, "{sums:?}");
     }
 
     #[test]

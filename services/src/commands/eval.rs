@@ -165,8 +165,8 @@ fn tokenizer(args: TokenizerArgs) -> Result<()> {
     }
     let reference = evaluate::static_reference(&eval_clips);
     results.insert(STATIC_REFERENCE.into(), serde_json::Value::Object(tables.add(STATIC_REFERENCE, &reference)?));
-    let Tables { table, per_source } = tables;
-    println!("{table}\n{per_source}");
+    let Tables { table, per_source, by_kind } = tables;
+    println!("{table}\n{per_source}\n{by_kind}");
     if args.models.iter().any(|m| m == "tat") {
         let transfers = transfer_table(&args, &clips, &mut encoder)?;
         let mut t = String::from(
@@ -208,6 +208,7 @@ const STATIC_REFERENCE: &str = "static pose (reference)";
 struct Tables {
     table: String,
     per_source: String,
+    by_kind: String,
 }
 
 impl Default for Tables {
@@ -218,6 +219,9 @@ impl Default for Tables {
             ),
             per_source: String::from(
                 "| model | split | source | clips | MPJPE | MPJPE (yaw aligned) | MPJPE (free root) | MPJPE (with trans) | GeoDist (deg) | GeoDist (free root) |\n|---|---|---|---|---|---|---|---|---|---|\n",
+            ),
+            by_kind: String::from(
+                "| model | split | GeoDist (deg) | root | joints that move joints | joints that move none |\n|---|---|---|---|---|---|\n",
             ),
         }
     }
@@ -262,6 +266,10 @@ impl Tables {
                 f(s.gp),
                 f(s.fs_truth),
                 f(s.gp_truth)
+            ));
+            self.by_kind.push_str(&format!(
+                "| {name} | {split} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+                s.geodist, s.geodist_root, s.geodist_inner, s.geodist_unseen
             ));
             model_json.insert(split.clone(), serde_json::to_value(s)?);
         }

@@ -9,7 +9,8 @@ use anyhow::Result;
 use anymo_tokenizer::features::{canonicalise, foot_joints};
 use anymo_tokenizer::kinematics::all_joint_positions;
 use anymo_tokenizer::metrics::{
-    foot_skating, geodesic_distance_deg, ground_penetration, mpjpe, mpjpe_root_aligned, mpjpe_yaw_aligned,
+    JointKind, foot_skating, geodesic_distance_deg, geodesic_sums_by_kind, ground_penetration, mpjpe,
+    mpjpe_root_aligned, mpjpe_yaw_aligned,
 };
 use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
@@ -39,6 +40,9 @@ pub struct Sums {
     gp: f64,
     fs_truth: f64,
     gp_truth: f64,
+    /// Summed angle and joint-frame count per [`JointKind`] (root, inner, unseen), anchored.
+    #[serde(default)]
+    geodist_kinds: [(f64, usize); 3],
 }
 
 /// The mean metrics of a set of clips.
@@ -72,6 +76,17 @@ pub struct Scores {
     pub fs_truth: f64,
     /// Ground penetration of the truth.
     pub gp_truth: f64,
+    /// GeoDist of the root joint alone (anchored), degrees. This and the next two are means
+    /// over joint-frames of their kind, so a rig with more such joints weighs more.
+    #[serde(default)]
+    pub geodist_root: f64,
+    /// GeoDist of the joints whose rotation moves other joints, degrees: what positions see.
+    #[serde(default)]
+    pub geodist_inner: f64,
+    /// GeoDist of the joints whose rotation moves no joint (leaves, joints with only zero-offset
+    /// descendants), degrees: what no position loss or MPJPE sees.
+    #[serde(default)]
+    pub geodist_unseen: f64,
 }
 
 impl Sums {
@@ -95,6 +110,11 @@ impl Sums {
         self.gp += w * ground_penetration(&pr) as f64;
         self.fs_truth += w * foot_skating(&pt, n, &feet, fps, CONTACT_HEIGHT) as f64;
         self.gp_truth += w * ground_penetration(&pt) as f64;
+        let kinds = JointKind::of(truth.skeleton());
+        let by_kind = geodesic_sums_by_kind(rebuilt.all_rotations(), truth.all_rotations(), &kinds);
+        for (sum, add) in self.geodist_kinds.iter_mut().zip(by_kind) {
+            *sum = (sum.0 + add.0, sum.1 + add.1);
+        }
     }
 
     /// Adds another set.
@@ -111,6 +131,9 @@ impl Sums {
         self.gp += o.gp;
         self.fs_truth += o.fs_truth;
         self.gp_truth += o.gp_truth;
+        for (sum, add) in self.geodist_kinds.iter_mut().zip(o.geodist_kinds) {
+            *sum = (sum.0 + add.0, sum.1 + add.1);
+        }
     }
 
     /// The means.
@@ -129,8 +152,16 @@ impl Sums {
             gp: self.gp / w,
             fs_truth: self.fs_truth / w,
             gp_truth: self.gp_truth / w,
+            geodist_root: kind_mean(self.geodist_kinds[JointKind::Root as usize]),
+            geodist_inner: kind_mean(self.geodist_kinds[JointKind::Inner as usize]),
+            geodist_unseen: kind_mean(self.geodist_kinds[JointKind::Unseen as usize]),
         }
     }
+}
+
+/// The mean of a summed angle over its joint-frames (zero when there are none).
+fn kind_mean((sum, count): (f64, usize)) -> f64 {
+    if count == 0 { 0.0 } else { sum / count as f64 }
 }
 
 /// Reconstruction results of one codec: per `(split, source)`, and clips it could not take.
