@@ -104,7 +104,6 @@ impl Sums {
         self.mpjpe_trans += w * mpjpe(&pr, &pt) as f64;
         self.mpjpe_yaw += w * mpjpe_yaw_aligned(&pr, &pt, n) as f64;
         self.mpjpe_free += w * mpjpe_root_aligned(&all_joint_positions(free), &pt, n) as f64;
-        self.geodist += w * geodesic_distance_deg(rebuilt.all_rotations(), truth.all_rotations()) as f64;
         self.geodist_free += w * geodesic_distance_deg(free.all_rotations(), truth.all_rotations()) as f64;
         self.fs += w * foot_skating(&pr, n, &feet, fps, CONTACT_HEIGHT) as f64;
         self.gp += w * ground_penetration(&pr) as f64;
@@ -112,9 +111,9 @@ impl Sums {
         self.gp_truth += w * ground_penetration(&pt) as f64;
         let kinds = JointKind::of(truth.skeleton());
         let by_kind = geodesic_sums_by_kind(rebuilt.all_rotations(), truth.all_rotations(), &kinds);
-        for (sum, add) in self.geodist_kinds.iter_mut().zip(by_kind) {
-            *sum = (sum.0 + add.0, sum.1 + add.1);
-        }
+        // The clip's mean over joints and frames, weighted by its frames: the summed angle / joints.
+        self.geodist += by_kind.iter().map(|(sum, _)| sum).sum::<f64>() / n as f64;
+        add_kinds(&mut self.geodist_kinds, by_kind);
     }
 
     /// Adds another set.
@@ -131,9 +130,7 @@ impl Sums {
         self.gp += o.gp;
         self.fs_truth += o.fs_truth;
         self.gp_truth += o.gp_truth;
-        for (sum, add) in self.geodist_kinds.iter_mut().zip(o.geodist_kinds) {
-            *sum = (sum.0 + add.0, sum.1 + add.1);
-        }
+        add_kinds(&mut self.geodist_kinds, o.geodist_kinds);
     }
 
     /// The means.
@@ -156,6 +153,13 @@ impl Sums {
             geodist_inner: kind_mean(self.geodist_kinds[JointKind::Inner as usize]),
             geodist_unseen: kind_mean(self.geodist_kinds[JointKind::Unseen as usize]),
         }
+    }
+}
+
+/// Adds summed angles and joint-frame counts per kind.
+fn add_kinds(into: &mut [(f64, usize); 3], add: [(f64, usize); 3]) {
+    for (sum, more) in into.iter_mut().zip(add) {
+        *sum = (sum.0 + more.0, sum.1 + more.1);
     }
 }
 
