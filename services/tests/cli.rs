@@ -62,6 +62,30 @@ fn fk_prints_joint_positions_as_json() {
 }
 
 #[test]
+fn fk_prints_global_orientations_and_headings() {
+    // Orientations compose down the chain: a root turned 30 degrees about +Y and tilted, then a
+    // child turned 45 more about its own +Y, faces 75 degrees; its quaternion is the product.
+    let chain = scratch_dir("fk-headings").join("chain.bvh");
+    std::fs::write(
+        &chain,
+        "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Yrotation Xrotation Zrotation\n \
+         JOINT Spine\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Yrotation Xrotation Zrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n }\n}\n\
+         MOTION\nFrames: 1\nFrame Time: 0.0333333\n0 0 0 30 20 0 45 0 0\n",
+    )
+    .unwrap();
+    let json: serde_json::Value = serde_json::from_str(&stdout(&anymo(&["fk", chain.to_str().unwrap()]))).unwrap();
+    let heading = |j: usize| json[j]["heading_degrees"].as_f64().unwrap();
+    assert!((heading(0) - 30.0).abs() < 1e-4, "{json}");
+    let root = glam::Quat::from_rotation_y(30f32.to_radians()) * glam::Quat::from_rotation_x(20f32.to_radians());
+    let spine = root * glam::Quat::from_rotation_y(45f32.to_radians());
+    let got: Vec<f32> = json[1]["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let want = spine.to_array();
+    let equal_up_to = |sign: f32| got.iter().zip(&want).all(|(a, b)| (a - sign * b).abs() < 1e-6);
+    assert!(equal_up_to(1.0) || equal_up_to(-1.0), "{got:?} against {want:?} (a quaternion or its negative)");
+    assert!((heading(1) - 75.0).abs() < 1e-3, "{json}");
+}
+
+#[test]
 fn convert_glb_animation_to_bvh() {
     let Some(dir) = data_dir() else { return };
     let out_dir = scratch_dir("convert-glb");

@@ -43,8 +43,9 @@ pub struct MotionFeatures {
     pub rotations: Vec<f32>,
 }
 
-/// The heading (yaw about +Y) of a rotation.
-fn heading_of(q: Quat) -> f32 {
+/// The heading of a rotation: the angle (radians) of its twist about +Y. The features remove the
+/// root's, so a model's decoded root orientation should have none.
+pub fn heading_of(q: Quat) -> f32 {
     let twist = twist_about(q, Vec3::Y);
     2.0 * twist.y.atan2(twist.w)
 }
@@ -123,7 +124,8 @@ pub fn from_features(features: &MotionFeatures, start: Start, skeleton: &Skeleto
     Motion::new(skeleton.clone(), frame_time, rotations, translations).expect("shapes match")
 }
 
-fn wrap_angle(a: f32) -> f32 {
+/// An angle (radians) brought into [-pi, pi).
+pub fn wrap_angle(a: f32) -> f32 {
     let two_pi = std::f32::consts::TAU;
     a - two_pi * ((a + std::f32::consts::PI) / two_pi).floor()
 }

@@ -1,8 +1,11 @@
-//! `anymo fk FILE --frame N`: global joint positions as JSON, in the file's units and axes.
+//! `anymo fk FILE --frame N`: global joint positions and orientations as JSON, in the file's
+//! units and axes; the heading column shows which way each joint turns about the vertical, to
+//! compare a decoded clip with its source.
 
 use anyhow::{Context, Result, bail};
 use anymo_tokenizer::bvh::{self, ReadOptions};
-use anymo_tokenizer::kinematics::joint_positions;
+use anymo_tokenizer::features::{heading_of, wrap_angle};
+use anymo_tokenizer::kinematics::global_transforms;
 use anymo_tokenizer::motion::Motion;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -17,9 +20,13 @@ pub struct Args {
 }
 
 #[derive(Serialize)]
-struct JointPosition<'a> {
+struct JointPose<'a> {
     name: &'a str,
     position: [f32; 3],
+    /// Global orientation as a unit quaternion, `[x, y, z, w]`.
+    rotation: [f32; 4],
+    /// The orientation's twist about +Y, degrees in [-180, 180).
+    heading_degrees: f32,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -29,13 +36,20 @@ pub fn run(args: Args) -> Result<()> {
         bail!("frame {} is out of range: {} has frames 0..{}", args.frame, args.file.display(), clip.frames());
     }
     let motion = Motion::from_bvh(&clip);
-    let positions = joint_positions(&motion, args.frame);
-    let out: Vec<JointPosition> = motion
+    let mut transforms = Vec::new();
+    let f = args.frame;
+    global_transforms(motion.skeleton(), motion.rotations(f), motion.translations(f), &mut transforms);
+    let out: Vec<JointPose> = motion
         .skeleton()
         .joints()
         .iter()
-        .zip(&positions)
-        .map(|(j, p)| JointPosition { name: &j.name, position: p.to_array() })
+        .zip(&transforms)
+        .map(|(j, t)| JointPose {
+            name: &j.name,
+            position: t.translation.to_array(),
+            rotation: t.rotation.to_array(),
+            heading_degrees: wrap_angle(heading_of(t.rotation)).to_degrees(),
+        })
         .collect();
     println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
