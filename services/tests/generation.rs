@@ -179,4 +179,17 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
         "3",
     ]);
     assert_eq!(f, 150);
+
+    // A tokenizer retrained under the generator's tokenizer's name is refused, not decoded with.
+    let weights = ck.join("tat.safetensors");
+    let mut bytes = std::fs::read(&weights).unwrap();
+    *bytes.last_mut().unwrap() ^= 1;
+    std::fs::write(&weights, bytes).unwrap();
+    let stale = generate(&human, &dir.join("stale.bvh"), &["--seconds", "2"]);
+    assert!(!stale.status.success());
+    let error = String::from_utf8_lossy(&stale.stderr);
+    assert!(
+        error.contains("straight was trained on other tat weights") && error.contains("anymo train generator"),
+        "{error}"
+    );
 }

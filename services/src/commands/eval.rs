@@ -330,10 +330,14 @@ fn generator(args: GeneratorArgs) -> Result<()> {
     let mut loaded = Vec::new();
     for name in &args.models {
         let (generator, card) = generation::load_generator(&args.dir, name)?;
+        let tokenizer = shipped::load_tat_of(&args.dir, &card, &mut encoder)?;
         eprintln!("{name}: {} steps", card.steps);
-        loaded.push((name.clone(), generator));
+        loaded.push((name.clone(), generator, tokenizer));
     }
-    let refs: Vec<(String, &anymo_generator::Generator)> = loaded.iter().map(|(n, g)| (n.clone(), g)).collect();
+    let refs: Vec<generation_eval::Candidate> = loaded
+        .iter()
+        .map(|(name, generator, tokenizer)| generation_eval::Candidate { name: name.clone(), generator, tokenizer })
+        .collect();
     let sampling = args.sampling.sampling();
     let rows = generation_eval::evaluate(&mut tat, &evaluator, &refs, &test, &mut encoder, sampling, args.seed)?;
     let mut table = String::from(

@@ -425,12 +425,17 @@ fn load_to_continue(
     Ok(previous)
 }
 
-/// The train split tokenized by the shipped tokenizer, and the card fields that describe it.
-fn token_clips(
-    common: &Common,
-    tokenizer: &str,
-    decoded: bool,
-) -> Result<(Vec<TokenClip>, DataRecord, RvqConfig, usize)> {
+/// The train split tokenized by a shipped tokenizer, and what the card records about both.
+struct TokenCorpus {
+    clips: Vec<TokenClip>,
+    record: DataRecord,
+    rvq: RvqConfig,
+    skeleton_dim: usize,
+    /// The card's `tokenizer_checkpoint` and `tokenizer_blake3`.
+    tokenizer: serde_json::Value,
+}
+
+fn token_clips(common: &Common, tokenizer: &str, decoded: bool) -> Result<TokenCorpus> {
     let clips = load(common)?;
     let train_clips: Vec<&data::ModelClip> = clips.iter().filter(|c| c.split == Split::Train).collect();
     let mut encoder = CachedEncoder::new(common.store.encoder()?);
@@ -438,7 +443,28 @@ fn token_clips(
     eprintln!("tokenizing {} training clips with {tokenizer}", train_clips.len());
     let tokens = generation::token_clips(&train_clips, &mut tat, &mut encoder, decoded)?;
     let record = data::data_record(&common.manifest, &train_clips);
-    Ok((tokens, record, tat.config().rvq, tat.config().owo.dim))
+    let blake3 = shipped::weights_blake3(&common.out_dir, tokenizer)?;
+    Ok(TokenCorpus {
+        clips: tokens,
+        record,
+        rvq: tat.config().rvq,
+        skeleton_dim: tat.config().owo.dim,
+        tokenizer: serde_json::json!({ "tokenizer_checkpoint": tokenizer, "tokenizer_blake3": blake3 }),
+    })
+}
+
+/// The card configuration of a model trained on a token corpus: the model's own configuration
+/// under `key`, the tokenizer it read, and the training settings.
+fn trained_on_tokens(
+    corpus: &TokenCorpus,
+    key: &str,
+    model: serde_json::Value,
+    settings: &train::StepTraining,
+) -> Result<serde_json::Value> {
+    let mut config = corpus.tokenizer.clone();
+    config[key] = model;
+    config["training"] = serde_json::to_value(settings)?;
+    Ok(config)
 }
 
 fn step_settings(common: &Common, steps: u64, lr: f64, batch_size: usize) -> train::StepTraining {
@@ -453,22 +479,23 @@ fn step_settings(common: &Common, steps: u64, lr: f64, batch_size: usize) -> tra
 }
 
 fn evaluator(args: EvaluatorArgs) -> Result<()> {
-    let (clips, record, rvq, _) = token_clips(&args.common, &args.tokenizer, true)?;
-    let config = EvaluatorConfig::new(rvq.dim);
+    let corpus = token_clips(&args.common, &args.tokenizer, true)?;
+    let clips = &corpus.clips;
+    let config = EvaluatorConfig::new(corpus.rvq.dim);
     let mut model = Evaluator::new(config, args.common.seed)?;
     eprintln!("evaluator: {} parameters", model.params().count());
     let settings = step_settings(&args.common, args.steps, args.lr, args.batch_size);
     let run = run_dir(&args.common, "evaluator")?;
     let mut running = 0f32;
     let state = train::train_steps(&mut model, Evaluator::params_mut, &settings, &run, |m, rng| {
-        let loss = m.batch_loss(&clips, settings.batch_size, rng)?;
+        let loss = m.batch_loss(clips, settings.batch_size, rng)?;
         running += (loss.to_scalar::<f32>()? - running) * 0.05;
         Ok((loss, format!("contrastive {running:.3}")))
     })?;
     let card = ModelCard {
         model: "evaluator".into(),
-        config: serde_json::json!({ "evaluator": config, "tokenizer_checkpoint": args.tokenizer, "training": settings }),
-        data: record,
+        config: trained_on_tokens(&corpus, "evaluator", serde_json::to_value(config)?, &settings)?,
+        data: corpus.record,
         steps: state.step,
         metrics: serde_json::json!({ "train_seconds": state.seconds }),
         command: command_line(),
@@ -479,7 +506,8 @@ fn evaluator(args: EvaluatorArgs) -> Result<()> {
 }
 
 fn generator(args: GeneratorArgs) -> Result<()> {
-    let (clips, record, rvq, skeleton_dim) = token_clips(&args.common, &args.tokenizer, false)?;
+    let corpus = token_clips(&args.common, &args.tokenizer, false)?;
+    let (clips, rvq) = (&corpus.clips, corpus.rvq);
     let kind = match args.kind {
         GeneratorKind::Masked => Kind::Masked,
         GeneratorKind::Autoregressive => Kind::Autoregressive,
@@ -488,7 +516,7 @@ fn generator(args: GeneratorArgs) -> Result<()> {
         Kind::Masked => "generator".into(),
         Kind::Autoregressive => "generator-ar".into(),
     });
-    let mut config = GeneratorConfig::new(kind, skeleton_dim, rvq.layers, rvq.codes);
+    let mut config = GeneratorConfig::new(kind, corpus.skeleton_dim, rvq.layers, rvq.codes);
     config.base.dim = args.dim;
     config.base.ff = 2 * args.dim;
     config.residual.dim = args.dim;
@@ -500,7 +528,7 @@ fn generator(args: GeneratorArgs) -> Result<()> {
     let run = run_dir(&args.common, &name)?;
     let mut running = [0f32; 3];
     let state = train::train_steps(&mut model, Generator::params_mut, &settings, &run, |m, rng| {
-        let (loss, parts) = m.batch_loss(&clips, settings.batch_size, rng)?;
+        let (loss, parts) = m.batch_loss(clips, settings.batch_size, rng)?;
         for (r, p) in running.iter_mut().zip(parts) {
             *r += (p - *r) * 0.05;
         }
@@ -508,8 +536,8 @@ fn generator(args: GeneratorArgs) -> Result<()> {
     })?;
     let card = ModelCard {
         model: name.clone(),
-        config: serde_json::json!({ "generator": config, "tokenizer_checkpoint": args.tokenizer, "training": settings }),
-        data: record,
+        config: trained_on_tokens(&corpus, "generator", serde_json::to_value(&config)?, &settings)?,
+        data: corpus.record,
         steps: state.step,
         metrics: serde_json::json!({ "train_seconds": state.seconds }),
         command: command_line(),

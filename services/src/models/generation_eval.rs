@@ -68,11 +68,23 @@ fn foot_figures(motion: &Motion) -> (f32, f32) {
     (foot_skating(&positions, n, &feet, motion.fps() as f32, CONTACT_HEIGHT), ground_penetration(&positions))
 }
 
-/// Scores the real test motions and each generator's motions for the same captions.
+/// A generator under evaluation: its name, the model, and the tokenizer it was trained on, which
+/// decodes its codes (the evaluator's tokenizer then encodes the motion, as it does real clips).
+pub struct Candidate<'a> {
+    /// The checkpoint name, for the table.
+    pub name: String,
+    /// The model.
+    pub generator: &'a Generator,
+    /// The tokenizer its codes belong to.
+    pub tokenizer: &'a Tat,
+}
+
+/// Scores the real test motions and each generator's motions for the same captions; `tat` is
+/// the tokenizer the evaluator reads.
 pub fn evaluate(
     tat: &mut Tat,
     evaluator: &Evaluator,
-    generators: &[(String, &Generator)],
+    generators: &[Candidate],
     test: &[&ModelClip],
     encoder: &mut CachedEncoder,
     sampling: Sampling,
@@ -103,12 +115,12 @@ pub fn evaluate(
     let mut rows = table("GT", &truth, &truth, 0.0);
 
     // Each model's codes (or the real clip's own, for the tokenizer's row) decoded on the clip's
-    // skeleton, re-encoded and scored like the real motion.
-    let mut score = |codes: Codes, i: usize, tat: &mut Tat| -> Result<Scored> {
+    // skeleton by the tokenizer they belong to, re-encoded and scored like the real motion.
+    let mut score = |codes: Codes, i: usize, decoder: Option<&Tat>, tat: &mut Tat| -> Result<Scored> {
         let skeleton = motions[i].motion.skeleton();
         let graph = Graphs::new(encoder).of(skeleton)?;
         let tokens = Tokens::whole(codes, per_token, motions[i].motion.fps());
-        let motion = detokenize(tat, &tokens, &graph, skeleton)?;
+        let motion = detokenize(decoder.unwrap_or(&*tat), &tokens, &graph, skeleton)?;
         let encoded = encode_whole(tat, &graph, &motion)?;
         let (fs, gp) = foot_figures(&motion);
         Ok(Scored {
@@ -122,19 +134,19 @@ pub fn evaluate(
     let started = Instant::now();
     let mut decoded = Vec::with_capacity(clips.len());
     for (i, clip) in clips.iter().enumerate() {
-        decoded.push(score(clip.codes[..clip.steps().min(max)].to_vec(), i, tat)?);
+        decoded.push(score(clip.codes[..clip.steps().min(max)].to_vec(), i, None, tat)?);
     }
     let seconds = started.elapsed().as_secs_f64() / clips.len().max(1) as f64;
     rows.extend(table(TOKENIZER_ROW, &decoded, &truth, seconds));
 
-    for (name, generator) in generators {
+    for Candidate { name, generator, tokenizer } in generators {
         let started = Instant::now();
         let mut generated = Vec::with_capacity(clips.len());
         for (i, clip) in clips.iter().enumerate() {
             let steps = clip.steps().min(max).min(generator.config().max_tokens());
             let request = Request { steps: Some(steps), samples: 1, sampling, seed: seed.wrapping_add(i as u64) };
             let codes = generator.generate(&clip.text[0], &clip.skeleton, &request)?.remove(0);
-            generated.push(score(codes, i, tat)?);
+            generated.push(score(codes, i, Some(*tokenizer), tat)?);
         }
         let seconds = started.elapsed().as_secs_f64() / clips.len().max(1) as f64;
         rows.extend(table(name, &generated, &truth, seconds));

@@ -58,8 +58,34 @@ pub fn load_tat(dir: &Path, name: &str, encoder: &mut CachedEncoder) -> Result<(
     Ok((tat, card))
 }
 
-/// Loads the TAT a generator or evaluator was trained on, as its model card names it.
+/// The blake3 of a checkpoint's weights (hex), which a generator's or evaluator's card records
+/// for the tokenizer it was trained on: a tokenizer retrained under the same name has another.
+pub fn weights_blake3(dir: &Path, name: &str) -> Result<String> {
+    let (weights, _) = files(dir, name);
+    let bytes = std::fs::read(&weights).with_context(|| format!("reading {}", weights.display()))?;
+    Ok(blake3::hash(&bytes).to_hex().to_string())
+}
+
+/// Loads the TAT a generator or evaluator was trained on, as its model card names it, and
+/// refuses a tokenizer of that name whose weights are not the ones it was trained on (its codes
+/// would mean something else).
 pub fn load_tat_of(dir: &Path, card: &ModelCard, encoder: &mut CachedEncoder) -> Result<Tat> {
     let tokenizer = card.config["tokenizer_checkpoint"].as_str().unwrap_or("tat");
+    let trained_on = card.config["tokenizer_blake3"].as_str().with_context(|| {
+        format!(
+            "the model card of {} does not record which {tokenizer} weights it was trained on; retrain it",
+            card.model
+        )
+    })?;
+    let present = weights_blake3(dir, tokenizer)?;
+    if present != trained_on {
+        bail!(
+            "{} was trained on other {tokenizer} weights than {} holds (blake3 {trained_on}, found {present}); \
+             retrain it with `anymo train {}` or restore the {tokenizer} it was trained on",
+            card.model,
+            dir.join(format!("{tokenizer}.safetensors")).display(),
+            if card.model == "evaluator" { "evaluator" } else { "generator" }
+        );
+    }
     Ok(load_tat(dir, tokenizer, encoder)?.0)
 }
