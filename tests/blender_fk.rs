@@ -5,10 +5,10 @@
 //! last frame). Set `ANYMO_BLENDER_REFS` to a folder made the same way to check more clips
 //! (the README's figure covers every clip of the corpus).
 
+use anymo_motion::bvh::{self, ReadOptions};
+use anymo_motion::kinematics::joint_positions;
+use anymo_motion::motion::Motion;
 use anymo_tests::{data_dir, reference_files};
-use anymo_tokenizer::bvh::{self, ReadOptions};
-use anymo_tokenizer::kinematics::joint_positions;
-use anymo_tokenizer::motion::Motion;
 use serde_json::Value;
 
 /// The largest tolerated distance, as a fraction of the skeleton's diameter. Blender stores

@@ -1,10 +1,10 @@
 //! Every BVH file of the shared corpus reads, writes back to identical numbers, and decodes
 //! to a motion that encodes back to the same poses.
 
+use anymo_motion::bvh::{self, ReadOptions};
+use anymo_motion::kinematics::all_joint_positions;
+use anymo_motion::motion::Motion;
 use anymo_tests::{data_dir, files_with_suffix};
-use anymo_tokenizer::bvh::{self, ReadOptions};
-use anymo_tokenizer::kinematics::all_joint_positions;
-use anymo_tokenizer::motion::Motion;
 
 #[test]
 fn every_corpus_file_round_trips_exactly_through_the_writer() {

@@ -5,10 +5,10 @@
 //! back to glTF's Y-up axes): `tests/fixtures/blender_gltf` holds a few files; set
 //! `ANYMO_BLENDER_GLTF_REFS` to a folder made for every GLB of the corpus.
 
+use anymo_motion::gltf::GltfAsset;
+use anymo_motion::kinematics::joint_positions;
+use anymo_motion::skeleton::EulerOrder;
 use anymo_tests::{data_dir, reference_files};
-use anymo_tokenizer::gltf::GltfAsset;
-use anymo_tokenizer::kinematics::joint_positions;
-use anymo_tokenizer::skeleton::EulerOrder;
 use serde_json::Value;
 
 /// Blender 3.4's importer departs from the glTF rules on some rigs (it turns the Triceratops

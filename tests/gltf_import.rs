@@ -2,12 +2,12 @@
 //! reads back, its joints follow the glTF skin, and a walking horse keeps its hooves on the
 //! ground.
 
+use anymo_motion::bvh::{self, ReadOptions};
+use anymo_motion::gltf::GltfAsset;
+use anymo_motion::kinematics::all_joint_positions;
+use anymo_motion::motion::Motion;
+use anymo_motion::skeleton::EulerOrder;
 use anymo_tests::{data_dir, files_with_suffix};
-use anymo_tokenizer::bvh::{self, ReadOptions};
-use anymo_tokenizer::gltf::GltfAsset;
-use anymo_tokenizer::kinematics::all_joint_positions;
-use anymo_tokenizer::motion::Motion;
-use anymo_tokenizer::skeleton::EulerOrder;
 
 #[test]
 fn every_glb_animation_converts_and_reads_back() {

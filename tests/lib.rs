@@ -19,15 +19,14 @@ pub fn data_dir() -> Option<PathBuf> {
     }
 }
 
-/// The sentence encoder's folder (`$ANYMO_MODELS`, else `anymo-data/models` in the workspace),
-/// if the model is there.
+/// The folder holding the sentence encoder's folder, where `anymo` itself looks for it (see
+/// `anymo_paths::models_dir`), if the model is there.
 pub fn models_dir() -> Option<PathBuf> {
-    let models = std::env::var_os("ANYMO_MODELS")
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models"), PathBuf::from);
-    if models.join("all-MiniLM-L6-v2/model.safetensors").is_file() {
+    let models = anymo_paths::models_dir().expect("a home folder or ANYMO_MODELS");
+    if models.join(anymo_paths::ENCODER_DIR_NAME).join("model.safetensors").is_file() {
         Some(models)
     } else {
-        eprintln!("skipping: no sentence encoder in {} (bash tools/setup.sh)", models.display());
+        eprintln!("skipping: no sentence encoder in {} (bash tools/setup.sh --models)", models.display());
         None
     }
 }

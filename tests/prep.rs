@@ -1,14 +1,14 @@
 //! Cleaning, canonicalisation, features and augmentation on the real corpus: every step either
 //! keeps the motion exactly or changes it in the one way it means to.
 
+use anymo_motion::bvh::{self, ReadOptions};
+use anymo_motion::features::{canonicalise, from_features, to_features};
+use anymo_motion::kinematics::all_joint_positions;
+use anymo_motion::motion::Motion;
+use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones};
+use anymo_motion::prep::clean::{CleanOptions, Rejection, clean};
+use anymo_motion::prep::labels::{label_skeleton, mirror_pairs};
 use anymo_tests::{data_dir, files_with_suffix};
-use anymo_tokenizer::bvh::{self, ReadOptions};
-use anymo_tokenizer::features::{canonicalise, from_features, to_features};
-use anymo_tokenizer::kinematics::all_joint_positions;
-use anymo_tokenizer::motion::Motion;
-use anymo_tokenizer::prep::augment::{mirror, rebase_rest_pose, scale_bones};
-use anymo_tokenizer::prep::clean::{CleanOptions, Rejection, clean};
-use anymo_tokenizer::prep::labels::{label_skeleton, mirror_pairs};
 use glam::Vec3;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -174,8 +174,8 @@ fn the_loader_batches_real_clips_into_finite_tensors() {
 
 #[test]
 fn a_walk_has_feet_that_touch_down_and_lift() {
-    use anymo_tokenizer::features::{foot_contacts, foot_joints, local_positions};
-    use anymo_tokenizer::prep::labels::label_name;
+    use anymo_motion::features::{foot_contacts, foot_joints, local_positions};
+    use anymo_motion::prep::labels::label_name;
     let Some(dir) = data_dir() else { return };
     let walk = dir.join("bandai/dataset-1/dataset-1_walk_active_001.bvh.gz");
     let motion = canonicalise(&clean(&load(&walk), &CleanOptions::default()).unwrap().motion);

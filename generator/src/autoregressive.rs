@@ -2,8 +2,8 @@
 //! from the condition and the tokens before it.
 
 use crate::condition::Condition;
-use crate::generate::TokenModel;
 use crate::sampling::{Sampling, draw, guide};
+use crate::token_model::TokenModel;
 use crate::trunk::{Trunk, TrunkConfig, cross_entropy};
 use anymo_tokenizer::nn::{Linear, Params};
 use candle_core::{Device, Result, Tensor};

@@ -9,26 +9,13 @@ use crate::length::LengthPredictor;
 use crate::masked::MaskedTransformer;
 use crate::residual::ResidualTransformer;
 use crate::sampling::Sampling;
+use crate::token_model::TokenModel;
 use crate::trunk::TrunkConfig;
 use anymo_tokenizer::nn::Params;
 use candle_core::Tensor;
 type Result<T, E = candle_core::Error> = std::result::Result<T, E>;
 use rand::{Rng, RngCore, SeedableRng};
 use serde::{Deserialize, Serialize};
-
-/// A model of first-layer token sequences given a condition.
-pub trait TokenModel {
-    /// Training loss on first-layer codes `(B, L)`.
-    fn loss(&self, codes: &[Vec<u32>], condition: &Condition, rng: &mut dyn RngCore) -> Result<Tensor>;
-    /// Codes `(B, L)` where `known` gives none, keeping the known ones.
-    fn sample(
-        &self,
-        condition: &Condition,
-        known: &[Vec<Option<u32>>],
-        sampling: &Sampling,
-        rng: &mut dyn RngCore,
-    ) -> Result<Vec<Vec<u32>>>;
-}
 
 /// Which first-layer model.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]

@@ -12,9 +12,11 @@ pub mod length;
 pub mod masked;
 pub mod residual;
 pub mod sampling;
+pub mod token_model;
 pub mod trunk;
 
 pub use condition::Condition;
 pub use corpus::{Crop, TokenClip};
 pub use evaluator::{Evaluator, EvaluatorConfig};
-pub use generate::{GenerationError, Generator, GeneratorConfig, Request, TokenModel};
+pub use generate::{GenerationError, Generator, GeneratorConfig, Request};
+pub use token_model::TokenModel;

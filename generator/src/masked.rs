@@ -3,8 +3,8 @@
 //! most confident tokens first.
 
 use crate::condition::Condition;
-use crate::generate::TokenModel;
 use crate::sampling::{Sampling, draw, guide, still_masked, training_mask_ratio};
+use crate::token_model::TokenModel;
 use crate::trunk::{Trunk, TrunkConfig, cross_entropy};
 use anymo_tokenizer::nn::{Linear, Params};
 use candle_core::{Device, Result, Tensor};

@@ -5,9 +5,9 @@
 //!
 //! `cargo bench -p anymo-tokenizer --bench train_step` (RAYON_NUM_THREADS sets the threads).
 
-use anymo_tokenizer::bvh::parse_str;
+use anymo_motion::bvh::parse_str;
+use anymo_motion::motion::Motion;
 use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
-use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::nn::{AdamW, AdamWConfig, Params, flops};
 use anymo_tokenizer::owo::graph::{NODE_INPUT_DIM, SkeletonGraph};
 use anymo_tokenizer::tat::objective::{Prepared, RootStats, loss};

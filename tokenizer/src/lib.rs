@@ -1,33 +1,10 @@
-//! anymo's motion data model and tokenizer.
-//!
-//! Everything anymo does starts here: BVH and glTF files become a [`skeleton::Skeleton`] and a
-//! [`motion::Motion`]; [`kinematics`] turns local joint transforms into global positions;
-//! [`features`] maps motion to the models' per-joint features and exactly back; [`prep`] cleans
-//! and normalises clips for training without touching what users get back; [`metrics`] measures
-//! reconstruction and transfer.
-//!
-//! ```
-//! use anymo_tokenizer::{bvh, kinematics, motion::Motion};
-//!
-//! let text = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n JOINT Head\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.0333333\n0 1 0 0 0 0 0 0 0\n";
-//! let clip = bvh::parse_str(text)?;
-//! let motion = Motion::from_bvh(&clip);
-//! let head = kinematics::joint_positions(&motion, 0)[1];
-//! assert_eq!(head, glam::Vec3::new(0.0, 2.0, 0.0));
-//! # Ok::<(), anymo_tokenizer::bvh::BvhError>(())
-//! ```
+//! anymo's motion tokenizer: the skeleton graph encoder OwO ([`owo`]), the topology-agnostic
+//! tokenizer TAT and its zero-padded baseline ([`tat`]), the training windows they learn from
+//! ([`dataset`]), and the small neural toolkit ([`nn`]) and sentence encoder ([`text`]) that the
+//! generator builds on too. Motion itself (files, kinematics, features) is `anymo-motion`'s.
 
-pub mod bvh;
 pub mod dataset;
-pub mod features;
-pub mod gltf;
-pub mod kinematics;
-pub mod metrics;
-pub mod motion;
 pub mod nn;
 pub mod owo;
-pub mod prep;
-pub mod rotation;
-pub mod skeleton;
 pub mod tat;
 pub mod text;

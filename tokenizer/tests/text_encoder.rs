@@ -4,18 +4,11 @@
 //!
 //! Needs the model from `bash tools/setup.sh`; without it the tests say so and skip.
 
-use anymo_tokenizer::text::{CachedEncoder, EMBEDDING_DIM, MODEL_DIR_NAME, SentenceEncoder, TextError};
-use std::path::{Path, PathBuf};
-
-fn model_dir() -> PathBuf {
-    match std::env::var_os("ANYMO_MODELS") {
-        Some(dir) => PathBuf::from(dir).join(MODEL_DIR_NAME),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../anymo-data/models").join(MODEL_DIR_NAME),
-    }
-}
+use anymo_tokenizer::text::{CachedEncoder, EMBEDDING_DIM, SentenceEncoder, TextError};
+use std::path::Path;
 
 fn encoder() -> Option<SentenceEncoder> {
-    match SentenceEncoder::load(model_dir()) {
+    match SentenceEncoder::load(anymo_paths::encoder_dir().expect("a home folder or ANYMO_MODELS")) {
         Ok(e) => Some(e),
         Err(e @ TextError::Missing { .. }) => {
             eprintln!("skipping: {e}");

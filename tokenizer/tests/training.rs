@@ -2,9 +2,9 @@
 //! receives a gradient (candle's fused layers silently drop them), the optimiser's state
 //! round-trips, and the quantiser behaves as residual VQ should.
 
-use anymo_tokenizer::bvh::parse_str;
+use anymo_motion::bvh::parse_str;
+use anymo_motion::motion::Motion;
 use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
-use anymo_tokenizer::motion::Motion;
 use anymo_tokenizer::nn::{AdamW, AdamWConfig, Params};
 use anymo_tokenizer::owo::graph::{GraphBatch, NODE_INPUT_DIM, SkeletonGraph};
 use anymo_tokenizer::owo::pretrain::{Heads, Targets, losses};

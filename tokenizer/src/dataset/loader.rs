@@ -3,9 +3,9 @@
 //! skeleton into candle tensors. Deterministic for a seed (ChaCha8, whose stream is fixed
 //! across platforms and versions).
 
-use crate::features::{ROOT_DIMS, ROT_DIMS, canonicalise, to_features};
-use crate::motion::Motion;
-use crate::prep::augment::{mirror, rebase_rest_pose, scale_bones, symmetric_factors};
+use anymo_motion::features::{ROOT_DIMS, ROT_DIMS, canonicalise, to_features};
+use anymo_motion::motion::Motion;
+use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones, symmetric_factors};
 use candle_core::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -75,7 +75,7 @@ pub struct WindowLoader {
 }
 
 impl WindowLoader {
-    /// A loader over cleaned clips (see [`crate::prep::clean`]).
+    /// A loader over cleaned clips (see [`anymo_motion::prep::clean`]).
     pub fn new(clips: Vec<Motion>, config: LoaderConfig) -> WindowLoader {
         let mut by_topology: BTreeMap<Vec<(Option<usize>, String)>, Vec<usize>> = BTreeMap::new();
         for (i, clip) in clips.iter().enumerate() {
@@ -97,7 +97,7 @@ impl WindowLoader {
     }
 
     /// The skeleton shared by the clips of a group (rest offsets of its first clip).
-    pub fn group_skeleton(&self, group: usize) -> &crate::skeleton::Skeleton {
+    pub fn group_skeleton(&self, group: usize) -> &anymo_motion::skeleton::Skeleton {
         self.clips[self.groups[group][0]].skeleton()
     }
 
@@ -208,7 +208,7 @@ fn shuffle<T>(items: &mut [T], rng: &mut ChaCha8Rng) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::parse_str;
+    use anymo_motion::bvh::parse_str;
 
     fn clip(name: &str, frames: usize) -> Motion {
         let mut text = format!(

@@ -4,13 +4,14 @@
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// What a checkpoint is and where it came from.
+/// What a checkpoint is and where it came from. `C` is the configuration's type: the typed
+/// struct of one kind of model where the reader knows the kind, JSON where it does not.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct ModelCard {
+pub struct ModelCard<C = serde_json::Value> {
     /// Which model (`owo`, `tat`, `baseline`).
     pub model: String,
     /// The model's configuration, enough to rebuild it.
-    pub config: serde_json::Value,
+    pub config: C,
     /// The training data: manifest path, its blake3 hash, clips and skeletons used.
     pub data: DataRecord,
     /// Optimiser steps taken.
@@ -64,7 +65,7 @@ pub fn load_card(path: &Path) -> Result<ModelCard, CardError> {
     serde_json::from_str(&text).map_err(|source| CardError::Json { path: path.display().to_string(), source })
 }
 
-impl ModelCard {
+impl<C: Serialize> ModelCard<C> {
     /// Writes the card as pretty JSON.
     pub fn save(&self, path: &Path) -> std::io::Result<()> {
         let text = serde_json::to_string_pretty(self).expect("a card serialises");

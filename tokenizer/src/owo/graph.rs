@@ -1,9 +1,9 @@
 //! A skeleton as OwO's input graph: joints plus one global node, parent<->child edges carrying
 //! the rest offset, and global<->joint edges carrying none.
 
-use crate::prep::labels::label_name;
-use crate::skeleton::Skeleton;
 use crate::text::{CachedEncoder, EMBEDDING_DIM, TextError};
+use anymo_motion::prep::labels::label_name;
+use anymo_motion::skeleton::Skeleton;
 use candle_core::{Device, Result, Tensor};
 use glam::Vec3;
 

@@ -6,8 +6,8 @@ use super::graph::{GLOBAL_NODE_TEXT, GraphBatch, SkeletonGraph, UNKNOWN_LABEL_TE
 use super::model::{Owo, OwoConfig};
 use super::variants::random_variant;
 use crate::nn::{FeedForward, Params};
-use crate::skeleton::Skeleton;
 use crate::text::{CachedEncoder, EMBEDDING_DIM, TextError};
+use anymo_motion::skeleton::Skeleton;
 use candle_core::{D, Device, Result, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

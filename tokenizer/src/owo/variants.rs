@@ -2,8 +2,8 @@
 //! topologies; these make more that stay anatomically plausible: limb chains dropped or
 //! duplicated, bones rescaled, and joints renamed in other rigs' conventions.
 
-use crate::prep::labels::{Side, label_name};
-use crate::skeleton::{Joint, Skeleton};
+use anymo_motion::prep::labels::{Side, label_name};
+use anymo_motion::skeleton::{Joint, Skeleton};
 use glam::Quat;
 use rand::Rng;
 
@@ -175,8 +175,8 @@ pub fn random_variant(skeleton: &Skeleton, rng: &mut impl Rng) -> Skeleton {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::parse_str;
-    use crate::motion::Motion;
+    use anymo_motion::bvh::parse_str;
+    use anymo_motion::motion::Motion;
     use glam::Vec3;
 
     fn skeleton() -> Skeleton {

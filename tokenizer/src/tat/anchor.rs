@@ -6,7 +6,7 @@
 //! facing the wrong way although every pose is right. Three numbers per window (the heading and
 //! planar position at its first frame) bound that error to one window, at no cost to the codes.
 
-use crate::features::{MotionFeatures, ROOT_DIMS, root_path};
+use anymo_motion::features::{MotionFeatures, ROOT_DIMS, root_path};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 

@@ -5,10 +5,10 @@ use super::model::{Decoder, Encoder, Fusion, OUTPUT_DIMS, TatConfig};
 use super::objective::{LossWeights, Prediction, Prepared, RootStats};
 use super::rvq::{Rvq, RvqConfig};
 use super::temporal::{Downsample, ResBlock, Upsample};
-use crate::features::ROT_DIMS;
 use crate::nn::{LayerNorm, Linear, Params};
 use crate::owo::graph::{GraphBatch, SkeletonGraph, sinusoidal};
 use crate::owo::{Owo, OwoConfig};
+use anymo_motion::features::ROT_DIMS;
 use candle_core::{D, Device, Result, Tensor};
 
 use serde::{Deserialize, Serialize};

@@ -5,7 +5,7 @@
 use candle_core::{D, Device, Result, Tensor};
 
 /// Rotation matrices `(..., 3, 3)` from rot6D `(..., 6)` by Gram-Schmidt, stored column-major
-/// (`m[..., c, r]` is row `r` of column `c`), matching [`crate::rotation::rot6d_to_quat`].
+/// (`m[..., c, r]` is row `r` of column `c`), matching [`anymo_motion::rotation::rot6d_to_quat`].
 pub fn rot6d_to_matrix(six: &Tensor) -> Result<Tensor> {
     let a = six.narrow(D::Minus1, 0, 3)?;
     let b = six.narrow(D::Minus1, 3, 3)?;
@@ -113,10 +113,10 @@ impl Levels {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::parse_str;
-    use crate::features::{ROT_DIMS, to_features};
-    use crate::kinematics::all_joint_positions;
-    use crate::motion::Motion;
+    use anymo_motion::bvh::parse_str;
+    use anymo_motion::features::{ROT_DIMS, to_features};
+    use anymo_motion::kinematics::all_joint_positions;
+    use anymo_motion::motion::Motion;
 
     #[test]
     fn tensor_fk_matches_the_reference_chain() {
@@ -138,7 +138,7 @@ mod tests {
         let (skeleton, ft, mut rotations, translations) = motion.clone().into_parts();
         for f in 0..frames {
             let six: [f32; 6] = features.rotations[f * joints * 6..f * joints * 6 + 6].try_into().unwrap();
-            rotations[f * joints] = crate::rotation::rot6d_to_quat(six);
+            rotations[f * joints] = anymo_motion::rotation::rot6d_to_quat(six);
         }
         let unheaded = Motion::new(skeleton, ft, rotations, translations).unwrap();
         let want = all_joint_positions(&unheaded);

@@ -1,0 +1,115 @@
+//! `anymo tokenize`, `anymo detokenize` and `anymo transfer`: motion to TAT tokens and back, on
+//! the source skeleton or any other, with the shipped checkpoints.
+
+use super::context::{CheckpointArgs, StoreArgs};
+use super::input;
+use anyhow::{Context, Result};
+use anymo_models::tokens::{TokenCodec, TokenFile};
+use anymo_motion::bvh;
+use anymo_motion::motion::Motion;
+use anymo_motion::skeleton::Skeleton;
+use anymo_tokenizer::text::CachedEncoder;
+use clap::Parser;
+use std::path::{Path, PathBuf};
+
+/// Options shared by the token commands.
+#[derive(Parser)]
+pub struct ModelArgs {
+    #[command(flatten)]
+    checkpoints: CheckpointArgs,
+    /// The tokenizer checkpoint.
+    #[arg(long, default_value = "tat")]
+    model: String,
+    #[command(flatten)]
+    store: StoreArgs,
+}
+
+#[derive(Parser)]
+pub struct TokenizeArgs {
+    /// A BVH (or GLB) clip.
+    input: PathBuf,
+    /// The glTF animation to read (default: the first).
+    #[arg(long)]
+    animation: Option<String>,
+    /// Write the tokens here instead of standard output.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    #[command(flatten)]
+    model: ModelArgs,
+}
+
+#[derive(Parser)]
+pub struct DetokenizeArgs {
+    /// Tokens written by `anymo tokenize`.
+    tokens: PathBuf,
+    /// The skeleton to animate: a BVH file (its motion, if any, is ignored).
+    #[arg(long)]
+    skeleton: PathBuf,
+    /// The BVH to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    model: ModelArgs,
+}
+
+#[derive(Parser)]
+pub struct TransferArgs {
+    /// The clip to move: a BVH (or GLB) file.
+    input: PathBuf,
+    /// The glTF animation to read (default: the first).
+    #[arg(long)]
+    animation: Option<String>,
+    /// The skeleton to move it onto: a BVH file.
+    #[arg(long)]
+    to: PathBuf,
+    /// The BVH to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    model: ModelArgs,
+}
+
+fn load(args: &ModelArgs) -> Result<TokenCodec> {
+    TokenCodec::load(&args.checkpoints.set().get(&args.model), CachedEncoder::new(args.store.encoder()?))
+}
+
+/// The skeleton of a BVH file (its motion, if any, is not needed).
+pub(super) fn read_skeleton(path: &Path) -> Result<Skeleton> {
+    let clip =
+        bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
+    Ok(clip.skeleton().clone())
+}
+
+pub(super) fn write_bvh(motion: &Motion, path: &Path) -> Result<()> {
+    let mut out = Vec::new();
+    bvh::write(&motion.to_bvh(), &mut out)?;
+    std::fs::write(path, out).with_context(|| format!("writing {}", path.display()))
+}
+
+pub fn run_tokenize(args: TokenizeArgs) -> Result<()> {
+    let mut codec = load(&args.model)?;
+    let motion = input::read_motion(&args.input, args.animation.as_deref())?;
+    let file = codec.tokenize(&motion).with_context(|| format!("tokenizing {}", args.input.display()))?;
+    let text = serde_json::to_string(&file)? + "\n";
+    match &args.output {
+        Some(path) => std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?,
+        None => print!("{text}"),
+    }
+    Ok(())
+}
+
+pub fn run_detokenize(args: DetokenizeArgs) -> Result<()> {
+    let text = std::fs::read_to_string(&args.tokens).with_context(|| format!("reading {}", args.tokens.display()))?;
+    let file: TokenFile = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a tokens file from `anymo tokenize`", args.tokens.display()))?;
+    let mut codec = load(&args.model)?;
+    let motion = codec.detokenize(&file.tokens, &read_skeleton(&args.skeleton)?)?;
+    write_bvh(&motion, &args.output)
+}
+
+pub fn run_transfer(args: TransferArgs) -> Result<()> {
+    let mut codec = load(&args.model)?;
+    let motion = input::read_motion(&args.input, args.animation.as_deref())?;
+    let moved = codec.transfer(&motion, &read_skeleton(&args.to)?)?;
+    write_bvh(&moved, &args.output)
+}

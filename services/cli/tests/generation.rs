@@ -1,0 +1,195 @@
+//! Text-to-motion end to end on a small sample of the real corpus, over the shipped tokenizer:
+//! a tiny evaluator, masked and autoregressive generators (the masked one killed and resumed,
+//! which must end exactly where an uninterrupted run ends), the generation evaluation, and
+//! `generate` / `edit` on a human, a quadruped and a zero-shot skeleton.
+
+use anymo_motion::bvh::{self, ReadOptions};
+use anymo_tests::{
+    data_dir, gunzip, models_dir, safetensors_values as tensors, scratch_dir, succeeded as ok, wait_for_saved_step,
+};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn anymo(models: &Path, args: &[String]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_anymo"));
+    c.args(args).env("ANYMO_MODELS", models).env("RAYON_NUM_THREADS", "1");
+    c
+}
+
+fn args(parts: &[&str]) -> Vec<String> {
+    parts.iter().map(|s| s.to_string()).collect()
+}
+
+/// A joint as outputs must keep it: name, parent, offset.
+type Joint = (String, Option<usize>, [f32; 3]);
+
+/// A BVH's joints and its frame count.
+fn shape(path: &Path) -> (Vec<Joint>, usize) {
+    let clip = bvh::read_path(path, ReadOptions::default()).unwrap();
+    let joints = clip.skeleton().joints().iter().map(|j| (j.name.clone(), j.parent, j.offset.to_array())).collect();
+    (joints, clip.frames())
+}
+
+#[test]
+fn tiny_generators_train_resume_evaluate_generate_and_edit() {
+    let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
+    let dir = scratch_dir("generation");
+    let ck = dir.join("ck");
+    std::fs::create_dir_all(&ck).unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints");
+    for file in ["owo.safetensors", "owo.json", "tat.safetensors", "tat.json"] {
+        std::fs::copy(shipped.join(file), ck.join(file)).unwrap();
+    }
+    let manifest = shared.join("manifest.tsv").to_string_lossy().into_owned();
+    let ck_s = ck.to_string_lossy().into_owned();
+    let train = |what: &str, name: &str, more: &[&str]| -> Vec<String> {
+        let run = dir.join("runs").join(name).to_string_lossy().into_owned();
+        let mut a =
+            args(&["train", what, "--manifest", &manifest, "--limit", "6", "--out-dir", &ck_s, "--run-dir", &run]);
+        a.extend(args(more));
+        a
+    };
+
+    ok(anymo(&models, &train("evaluator", "evaluator", &["--steps", "3", "--batch-size", "8"])).output().unwrap());
+    let tiny = ["--steps", "6", "--batch-size", "4", "--dim", "32", "--save-every", "0"];
+    let masked = |name: &str| train("generator", name, &[&["--name", name][..], &tiny].concat());
+    ok(anymo(&models, &masked("straight")).output().unwrap());
+    let mut child = anymo(&models, &masked("killed")).stderr(std::process::Stdio::null()).spawn().unwrap();
+    wait_for_saved_step(&dir.join("runs/killed/state.json"), 2);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let resumed = ok(anymo(&models, &masked("killed")).output().unwrap());
+    assert!(String::from_utf8_lossy(&resumed.stderr).contains("resuming at step"), "the second run resumed");
+    let (a, b) = (tensors(&ck.join("straight.safetensors")), tensors(&ck.join("killed.safetensors")));
+    assert_eq!(a.len(), b.len());
+    for ((na, va), (nb, vb)) in a.iter().zip(&b) {
+        assert_eq!(na, nb);
+        assert!(va == vb, "{na} differs between the straight and the resumed run");
+    }
+    let ar = [&["--kind", "autoregressive", "--name", "ar"][..], &tiny].concat();
+    ok(anymo(&models, &train("generator", "ar", &ar)).output().unwrap());
+
+    // The evaluation: GT and both generators, all clips and per subject.
+    let results = dir.join("eval.json");
+    let eval = args(&[
+        "eval",
+        "generator",
+        "--manifest",
+        &manifest,
+        "--limit",
+        "4",
+        "--dir",
+        &ck_s,
+        "--models",
+        "straight,ar",
+        "--json",
+        &results.to_string_lossy(),
+    ]);
+    ok(anymo(&models, &eval).output().unwrap());
+    let results: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&results).unwrap()).unwrap();
+    let rows = results["rows"].as_array().unwrap();
+    for model in ["GT", "straight", "ar"] {
+        let all = rows.iter().find(|r| r["model"] == model && r["subset"] == "all").expect("an all-clips row");
+        assert_eq!(all["clips"], 4, "{model}");
+        for k in 0..3 {
+            let r = all["r_precision"][k].as_f64().unwrap();
+            assert!((0.0..=1.0).contains(&r), "{model} R@{}: {r}", k + 1);
+        }
+        assert!(all["fid"].as_f64().unwrap().is_finite());
+    }
+    let gt = rows.iter().find(|r| r["model"] == "GT" && r["subset"] == "all").unwrap();
+    assert!(gt["fid"].as_f64().unwrap().abs() < 1e-3, "the real motions are their own reference");
+
+    // Generation on a human, a quadruped and a zero-shot skeleton keeps each hierarchy.
+    let find = |needle: &str| -> PathBuf {
+        let gz = anymo_tests::files_with_suffix(&shared, ".bvh.gz")
+            .into_iter()
+            .find(|p| p.to_string_lossy().contains(needle))
+            .unwrap_or_else(|| panic!("a clip matching {needle}"));
+        let out = dir.join(format!("{}.bvh", needle.replace('/', "_")));
+        gunzip(&gz, &out);
+        out
+    };
+    let human = find("dataset-1_walk_normal_001");
+    let horse = find("Horse__");
+    let spider = find("Spider__Spider_Walk");
+    let model = ["--checkpoints", &ck_s, "--model", "straight"];
+    let generate = |skeleton: &Path, out: &Path, more: &[&str]| -> Output {
+        let mut a = args(&["generate", "a creature walks forward", "--skeleton", &skeleton.to_string_lossy()]);
+        a.extend(args(&["-o", &out.to_string_lossy()]));
+        a.extend(args(&model));
+        a.extend(args(more));
+        anymo(&models, &a).output().unwrap()
+    };
+    for skeleton in [&human, &horse, &spider] {
+        let out = dir.join("generated.bvh");
+        ok(generate(skeleton, &out, &["--seconds", "4", "--seed", "7"]));
+        let (joints, frames) = shape(&out);
+        assert_eq!(joints, shape(skeleton).0, "{}", skeleton.display());
+        assert_eq!(frames, 120, "4 seconds at 30 fps");
+    }
+    // The shipped generator works on a clean clone, with no checkpoint options.
+    let shipped_out = dir.join("shipped.bvh");
+    let mut a = args(&["generate", "a horse gallops", "--skeleton", &horse.to_string_lossy(), "--seconds", "3"]);
+    a.extend(args(&["-o", &shipped_out.to_string_lossy()]));
+    ok(anymo(&models, &a).env_remove("ANYMO_CHECKPOINTS").output().unwrap());
+    assert_eq!(shape(&shipped_out), (shape(&horse).0, 90));
+    // Seeds repeat; several samples land beside each other.
+    let (one, two) = (dir.join("one.bvh"), dir.join("two.bvh"));
+    ok(generate(&human, &one, &["--seconds", "2", "--seed", "3"]));
+    ok(generate(&human, &two, &["--seconds", "2", "--seed", "3", "--samples", "2"]));
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "the same seed gives the same motion");
+    assert_ne!(std::fs::read(&two).unwrap(), std::fs::read(dir.join("two-2.bvh")).unwrap());
+    // Without a duration the length predictor decides; over the limit is refused with it.
+    ok(generate(&human, &dir.join("predicted.bvh"), &[]));
+    assert!(shape(&dir.join("predicted.bvh")).1 > 0);
+    let refused = generate(&human, &dir.join("long.bvh"), &["--seconds", "600"]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("at most 30 seconds"));
+
+    // Edits keep the clip's skeleton; inpainting keeps its length, continuing adds to it.
+    let (joints, frames) = shape(&human);
+    let edited = dir.join("edited.bvh");
+    let edit = |more: &[&str]| {
+        let mut a = args(&["edit"]);
+        a.extend(args(more));
+        a.extend(args(&["-o", &edited.to_string_lossy()]));
+        a.extend(args(&model));
+        ok(anymo(&models, &a).output().unwrap());
+        shape(&edited)
+    };
+    let h = human.to_string_lossy();
+    let source_fps = bvh::read_path(&human, ReadOptions::default()).unwrap().frame_time();
+    let at_30 = (frames as f64 * source_fps * 30.0).round() as usize;
+    let (j, f) = edit(&["inpaint", &h, "--prompt", "a person jumps", "--from", "1", "--to", "2"]);
+    assert_eq!((j, f.abs_diff(at_30) <= 1), (joints.clone(), true), "inpainting keeps the clip's length ({f})");
+    let (_, f) = edit(&["continue", &h, "--prompt", "a person sits down", "--seconds", "2"]);
+    assert!(f.abs_diff(at_30 + 60) <= 1, "continuing adds two seconds ({f} frames)");
+    let (_, f) = edit(&[
+        "chain",
+        "--skeleton",
+        &h,
+        "--prompt",
+        "a person walks",
+        "--seconds",
+        "2",
+        "--prompt",
+        "a person waves",
+        "--seconds",
+        "3",
+    ]);
+    assert_eq!(f, 150);
+
+    // A tokenizer retrained under the generator's tokenizer's name is refused, not decoded with.
+    let weights = ck.join("tat.safetensors");
+    let mut bytes = std::fs::read(&weights).unwrap();
+    *bytes.last_mut().unwrap() ^= 1;
+    std::fs::write(&weights, bytes).unwrap();
+    let stale = generate(&human, &dir.join("stale.bvh"), &["--seconds", "2"]);
+    assert!(!stale.status.success());
+    let error = String::from_utf8_lossy(&stale.stderr);
+    assert!(
+        error.contains("straight was trained on other tat weights") && error.contains("anymo train generator"),
+        "{error}"
+    );
+}

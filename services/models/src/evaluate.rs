@@ -1,0 +1,328 @@
+//! The tokenizer evaluation of EVAL.md: reconstruction (MPJPE with and without translation,
+//! GeoDist, foot skating, ground penetration) per split and source, and zero-shot transfer (cycle
+//! consistency, foot skating and ground penetration of transfers, and NEC appendix F's
+//! correlation of pairwise motion distances before and after transfer).
+
+use super::codecs::Graphs;
+use super::data::ModelClip;
+use anyhow::Result;
+use anymo_motion::features::{canonicalise, foot_joints};
+use anymo_motion::kinematics::all_joint_positions;
+use anymo_motion::metrics::{
+    JointKind, foot_skating, geodesic_distance_deg, geodesic_sums_by_kind, ground_penetration, mpjpe,
+    mpjpe_root_aligned, mpjpe_yaw_aligned,
+};
+use anymo_motion::motion::Motion;
+use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
+use anymo_tokenizer::tat::{Codec, Tat};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Contact height for foot skating, in skeleton diameters.
+pub const CONTACT_HEIGHT: f32 = 0.05;
+/// Feet are leaves whose mean height is within this fraction of the diameter of the lowest leaf's.
+pub const FOOT_BAND: f32 = 0.1;
+
+/// Frame-weighted sums of the reconstruction metrics.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Sums {
+    /// Clips measured.
+    pub clips: usize,
+    /// Frames measured.
+    pub frames: usize,
+    mpjpe: f64,
+    mpjpe_trans: f64,
+    mpjpe_yaw: f64,
+    mpjpe_free: f64,
+    geodist: f64,
+    geodist_free: f64,
+    fs: f64,
+    gp: f64,
+    fs_truth: f64,
+    gp_truth: f64,
+    /// Summed angle and joint-frame count per [`JointKind`] (root, inner, unseen), anchored.
+    #[serde(default)]
+    geodist_kinds: [(f64, usize); 3],
+}
+
+/// The mean metrics of a set of clips.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Scores {
+    /// Clips measured.
+    pub clips: usize,
+    /// Frames measured.
+    pub frames: usize,
+    /// Root-aligned MPJPE, diameters.
+    pub mpjpe: f64,
+    /// MPJPE with translation, diameters.
+    pub mpjpe_trans: f64,
+    /// MPJPE with the root's position and the best turn about +Y aligned per frame: the pose
+    /// alone, without the heading error that builds up over a long clip.
+    pub mpjpe_yaw: f64,
+    /// Root-aligned MPJPE with the root integrated from the decoded rates alone (no anchors), as
+    /// generated tokens decode: the heading error builds up over the clip.
+    #[serde(default)]
+    pub mpjpe_free: f64,
+    /// Mean geodesic distance of local rotations, degrees.
+    pub geodist: f64,
+    /// GeoDist without anchors (the root joint's rotation carries the heading).
+    #[serde(default)]
+    pub geodist_free: f64,
+    /// Foot skating of the reconstruction, diameters per second.
+    pub fs: f64,
+    /// Ground penetration of the reconstruction, diameters.
+    pub gp: f64,
+    /// Foot skating of the truth.
+    pub fs_truth: f64,
+    /// Ground penetration of the truth.
+    pub gp_truth: f64,
+    /// GeoDist of the root joint alone (anchored), degrees. This and the next two are means
+    /// over joint-frames of their kind, so a rig with more such joints weighs more.
+    #[serde(default)]
+    pub geodist_root: f64,
+    /// GeoDist of the joints whose rotation moves other joints, degrees: what positions see.
+    #[serde(default)]
+    pub geodist_inner: f64,
+    /// GeoDist of the joints whose rotation moves no joint (leaves, joints with only zero-offset
+    /// descendants), degrees: what no position loss or MPJPE sees.
+    #[serde(default)]
+    pub geodist_unseen: f64,
+}
+
+impl Sums {
+    /// Adds one clip's truth and reconstruction, with the root anchored and free.
+    pub fn add(&mut self, truth: &Motion, rebuilt: &Motion, free: &Motion) {
+        let n = truth.skeleton().len();
+        let frames = truth.frames();
+        let (pt, pr) = (all_joint_positions(truth), all_joint_positions(rebuilt));
+        let feet = foot_joints(truth, FOOT_BAND);
+        let fps = truth.fps() as f32;
+        let w = frames as f64;
+        self.clips += 1;
+        self.frames += frames;
+        self.mpjpe += w * mpjpe_root_aligned(&pr, &pt, n) as f64;
+        self.mpjpe_trans += w * mpjpe(&pr, &pt) as f64;
+        self.mpjpe_yaw += w * mpjpe_yaw_aligned(&pr, &pt, n) as f64;
+        self.mpjpe_free += w * mpjpe_root_aligned(&all_joint_positions(free), &pt, n) as f64;
+        self.geodist_free += w * geodesic_distance_deg(free.all_rotations(), truth.all_rotations()) as f64;
+        self.fs += w * foot_skating(&pr, n, &feet, fps, CONTACT_HEIGHT) as f64;
+        self.gp += w * ground_penetration(&pr) as f64;
+        self.fs_truth += w * foot_skating(&pt, n, &feet, fps, CONTACT_HEIGHT) as f64;
+        self.gp_truth += w * ground_penetration(&pt) as f64;
+        let kinds = JointKind::of(truth.skeleton());
+        let by_kind = geodesic_sums_by_kind(rebuilt.all_rotations(), truth.all_rotations(), &kinds);
+        // The clip's mean over joints and frames, weighted by its frames: the summed angle / joints.
+        self.geodist += by_kind.iter().map(|(sum, _)| sum).sum::<f64>() / n as f64;
+        add_kinds(&mut self.geodist_kinds, by_kind);
+    }
+
+    /// Adds another set.
+    pub fn merge(&mut self, o: &Sums) {
+        self.clips += o.clips;
+        self.frames += o.frames;
+        self.mpjpe += o.mpjpe;
+        self.mpjpe_trans += o.mpjpe_trans;
+        self.mpjpe_yaw += o.mpjpe_yaw;
+        self.mpjpe_free += o.mpjpe_free;
+        self.geodist += o.geodist;
+        self.geodist_free += o.geodist_free;
+        self.fs += o.fs;
+        self.gp += o.gp;
+        self.fs_truth += o.fs_truth;
+        self.gp_truth += o.gp_truth;
+        add_kinds(&mut self.geodist_kinds, o.geodist_kinds);
+    }
+
+    /// The means.
+    pub fn scores(&self) -> Scores {
+        let w = (self.frames as f64).max(1.0);
+        Scores {
+            clips: self.clips,
+            frames: self.frames,
+            mpjpe: self.mpjpe / w,
+            mpjpe_trans: self.mpjpe_trans / w,
+            mpjpe_yaw: self.mpjpe_yaw / w,
+            mpjpe_free: self.mpjpe_free / w,
+            geodist: self.geodist / w,
+            geodist_free: self.geodist_free / w,
+            fs: self.fs / w,
+            gp: self.gp / w,
+            fs_truth: self.fs_truth / w,
+            gp_truth: self.gp_truth / w,
+            geodist_root: kind_mean(self.geodist_kinds[JointKind::Root as usize]),
+            geodist_inner: kind_mean(self.geodist_kinds[JointKind::Inner as usize]),
+            geodist_unseen: kind_mean(self.geodist_kinds[JointKind::Unseen as usize]),
+        }
+    }
+}
+
+/// Adds summed angles and joint-frame counts per kind.
+fn add_kinds(into: &mut [(f64, usize); 3], add: [(f64, usize); 3]) {
+    for (sum, more) in into.iter_mut().zip(add) {
+        *sum = (sum.0 + more.0, sum.1 + more.1);
+    }
+}
+
+/// The mean of a summed angle over its joint-frames (zero when there are none).
+fn kind_mean((sum, count): (f64, usize)) -> f64 {
+    if count == 0 { 0.0 } else { sum / count as f64 }
+}
+
+/// Reconstruction results of one codec: per `(split, source)`, and clips it could not take.
+#[derive(Default)]
+pub struct Reconstruction {
+    /// Sums per split and source.
+    pub groups: BTreeMap<(String, String), Sums>,
+    /// Clips the codec refused (the baseline cannot take skeletons larger than its padding).
+    pub refused: usize,
+}
+
+/// Runs every clip through the codec.
+pub fn reconstruction(
+    codec: &mut dyn Codec,
+    graphs: &mut Graphs,
+    clips: &[&ModelClip],
+    window: usize,
+    overlap: usize,
+) -> Result<Reconstruction> {
+    let mut out = Reconstruction::default();
+    for clip in clips {
+        let graph = graphs.of(clip.motion.skeleton())?;
+        match reconstruct(codec, &graph, &clip.motion, window, overlap) {
+            Ok(r) => out.groups.entry((clip.split.as_str().to_string(), clip.item.source.clone())).or_default().add(
+                &r.truth,
+                &r.anchored,
+                &r.free,
+            ),
+            Err(_) => out.refused += 1,
+        }
+    }
+    Ok(out)
+}
+
+/// A clip held still: every joint but the root keeps its mean local rotation over the clip, and
+/// the root moves as it does in the clip. A reference for the table: a tokenizer that keeps no
+/// motion but the root's would score this.
+pub fn static_pose(motion: &Motion) -> Motion {
+    let (n, frames) = (motion.skeleton().len(), motion.frames());
+    let mean: Vec<glam::Quat> = (0..n)
+        .map(|j| {
+            let first = glam::Vec4::from(motion.rotations(0)[j]);
+            let sum = (0..frames).fold(glam::Vec4::ZERO, |acc, f| {
+                let q = glam::Vec4::from(motion.rotations(f)[j]);
+                acc + if q.dot(first) < 0.0 { -q } else { q }
+            });
+            glam::Quat::from_vec4(sum).normalize()
+        })
+        .collect();
+    let rotations = (0..frames)
+        .flat_map(|f| (0..n).map(move |j| (f, j)))
+        .map(|(f, j)| if j == 0 { motion.rotations(f)[0] } else { mean[j] })
+        .collect();
+    Motion::new(motion.skeleton().clone(), motion.frame_time(), rotations, motion.all_translations().to_vec())
+        .expect("the clip's own shapes")
+}
+
+/// The [`static_pose`] reference over the clips, grouped like [`reconstruction`].
+pub fn static_reference(clips: &[&ModelClip]) -> Reconstruction {
+    let mut out = Reconstruction::default();
+    for clip in clips {
+        let truth = canonicalise(&clip.motion);
+        let still = static_pose(&truth);
+        out.groups
+            .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
+            .or_default()
+            .add(&truth, &still, &still);
+    }
+    out
+}
+
+/// One transfer direction: clips of one kind onto one target skeleton.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TransferScores {
+    /// What moves where ("human -> quadruped").
+    pub name: String,
+    /// The target skeleton's subject and joint count.
+    pub target: String,
+    /// Clips transferred.
+    pub clips: usize,
+    /// Root-aligned MPJPE of A -> B -> A against A, diameters.
+    pub cycle_mpjpe: f64,
+    /// Root-aligned MPJPE of A -> A (plain reconstruction), for reference.
+    pub reconstruction_mpjpe: f64,
+    /// Foot skating of the transfers, diameters per second.
+    pub fs: f64,
+    /// Ground penetration of the transfers, diameters.
+    pub gp: f64,
+    /// Pearson correlation of pairwise motion distances before and after transfer (NEC F).
+    pub distance_correlation: f64,
+}
+
+fn pairwise(motions: &[Motion]) -> Vec<f64> {
+    let mut out = Vec::new();
+    let positions: Vec<Vec<glam::Vec3>> = motions.iter().map(all_joint_positions).collect();
+    for a in 0..motions.len() {
+        for b in a + 1..motions.len() {
+            let n = motions[a].skeleton().len();
+            let frames = motions[a].frames().min(motions[b].frames());
+            let d = mpjpe_root_aligned(&positions[a][..frames * n], &positions[b][..frames * n], n);
+            out.push(d as f64);
+        }
+    }
+    out
+}
+
+fn pearson(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let cov: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let vx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
+    let vy: f64 = y.iter().map(|b| (b - my).powi(2)).sum();
+    cov / (vx * vy).sqrt().max(1e-12)
+}
+
+/// Transfers `sources` onto `target` (a cleaned clip whose skeleton and feet are the target's).
+pub fn transfer(
+    tat: &mut Tat,
+    graphs: &mut Graphs,
+    name: &str,
+    sources: &[&ModelClip],
+    target: &ModelClip,
+) -> Result<TransferScores> {
+    let target_skeleton = target.motion.skeleton();
+    let target_graph = graphs.of(target_skeleton)?;
+    let feet = foot_joints(&target.motion, FOOT_BAND);
+    let (mut cycle, mut recon, mut fs, mut gp, mut frames) = (0f64, 0f64, 0f64, 0f64, 0f64);
+    let mut originals = Vec::new();
+    let mut transferred = Vec::new();
+    for clip in sources {
+        let graph = graphs.of(clip.motion.skeleton())?;
+        let tokens = tokenize(tat, &graph, &clip.motion)?;
+        let own = detokenize(tat, &tokens, &graph, clip.motion.skeleton())?;
+        let moved = detokenize(tat, &tokens, &target_graph, target_skeleton)?;
+        let back_tokens = tokenize(tat, &target_graph, &moved)?;
+        let back = detokenize(tat, &back_tokens, &graph, clip.motion.skeleton())?;
+        let n = clip.motion.skeleton().len();
+        let truth = all_joint_positions(&clip.motion);
+        let w = clip.motion.frames() as f64;
+        cycle += w * mpjpe_root_aligned(&all_joint_positions(&back), &truth, n) as f64;
+        recon += w * mpjpe_root_aligned(&all_joint_positions(&own), &truth, n) as f64;
+        let pm = all_joint_positions(&moved);
+        fs += w * foot_skating(&pm, target_skeleton.len(), &feet, moved.fps() as f32, CONTACT_HEIGHT) as f64;
+        gp += w * ground_penetration(&pm) as f64;
+        frames += w;
+        originals.push(clip.motion.clone());
+        transferred.push(moved);
+    }
+    let frames = frames.max(1.0);
+    Ok(TransferScores {
+        name: name.to_string(),
+        target: format!("{} ({} joints)", target.item.subject, target_skeleton.len()),
+        clips: sources.len(),
+        cycle_mpjpe: cycle / frames,
+        reconstruction_mpjpe: recon / frames,
+        fs: fs / frames,
+        gp: gp / frames,
+        distance_correlation: pearson(&pairwise(&originals), &pairwise(&transferred)),
+    })
+}

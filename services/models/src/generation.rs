@@ -1,0 +1,75 @@
+//! The generator's and evaluator's data and checkpoints: clips tokenized whole by the shipped
+//! TAT with their caption and skeleton embeddings, and loading trained models by name.
+
+use super::codecs::Graphs;
+use super::data::ModelClip;
+use crate::card::{EvaluatorCard, GeneratorCard};
+use crate::checkpoint::Checkpoint;
+use anyhow::Result;
+use anymo_generator::{Evaluator, Generator, TokenClip};
+use anymo_tokenizer::nn::ModelCard;
+use anymo_tokenizer::tat::Tat;
+use anymo_tokenizer::tat::window::{detokenize, encode_whole};
+use anymo_tokenizer::text::CachedEncoder;
+
+/// Subjects counted as humans in the per-subject figures; every other subject is an animal or
+/// creature.
+pub const HUMAN_SUBJECTS: [&str; 4] = ["person", "character", "astronaut", "knight"];
+
+/// Whether a subject is human.
+pub fn is_human(subject: &str) -> bool {
+    HUMAN_SUBJECTS.contains(&subject)
+}
+
+/// Tokenizes clips whole with TAT and embeds their captions and skeletons; with `decoded`, also
+/// the latents of each clip's codes decoded and encoded again (for the evaluator).
+pub fn token_clips(
+    clips: &[&ModelClip],
+    tat: &mut Tat,
+    encoder: &mut CachedEncoder,
+    decoded: bool,
+) -> Result<Vec<TokenClip>> {
+    let mut out = Vec::with_capacity(clips.len());
+    for clip in clips {
+        let captions =
+            if clip.item.captions.is_empty() { vec![clip.item.subject.clone()] } else { clip.item.captions.clone() };
+        let refs: Vec<&str> = captions.iter().map(String::as_str).collect();
+        let text = encoder.encode(&refs)?;
+        let graph = Graphs::new(encoder).of(clip.motion.skeleton())?;
+        let skeleton = tat.skeleton_embedding(&graph)?;
+        let encoded = encode_whole(tat, &graph, &clip.motion)?;
+        let decoded_latent = if decoded {
+            let motion = detokenize(tat, &encoded.tokens, &graph, clip.motion.skeleton())?;
+            encode_whole(tat, &graph, &motion)?.latent
+        } else {
+            Vec::new()
+        };
+        out.push(TokenClip {
+            key: clip.item.key.clone(),
+            subject: clip.item.subject.clone(),
+            captions,
+            text,
+            skeleton,
+            codes: encoded.tokens.codes.into_iter().next().unwrap_or_default(),
+            latent: encoded.latent,
+            decoded_latent,
+        });
+    }
+    Ok(out)
+}
+
+/// Loads a trained generator (`generator`, `generator-ar`, ...).
+pub fn load_generator(checkpoint: &Checkpoint) -> Result<(Generator, ModelCard<GeneratorCard>)> {
+    let card: ModelCard<GeneratorCard> = checkpoint.card("a generator")?;
+    let mut generator = Generator::new(card.config.generator.clone(), 0)?;
+    checkpoint.load_into(generator.params_mut())?;
+    Ok((generator, card))
+}
+
+/// Loads a trained text-motion evaluator.
+pub fn load_evaluator(checkpoint: &Checkpoint) -> Result<(Evaluator, ModelCard<EvaluatorCard>)> {
+    let card: ModelCard<EvaluatorCard> = checkpoint.card("an evaluator")?;
+    let mut evaluator = Evaluator::new(card.config.evaluator, 0)?;
+    checkpoint.load_into(evaluator.params_mut())?;
+    Ok((evaluator, card))
+}

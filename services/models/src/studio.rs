@@ -1,0 +1,228 @@
+//! Text to motion as users meet it: loaded models, a target skeleton prepared once, prompts
+//! and durations checked against the limits, and generated codes rendered onto the user's own
+//! skeleton. The CLI's `generate` and `edit` use it, and so do the benchmark and the server.
+
+use super::codecs::Graphs;
+use super::data::MODEL_FPS;
+use super::generation;
+use crate::checkpoint::Checkpoint;
+use anyhow::Result;
+use anymo_generator::generate::Codes;
+use anymo_generator::{GenerationError, Generator, Request};
+use anymo_motion::motion::Motion;
+use anymo_motion::prep::clean::{CleanClip, CleanOptions, clean};
+use anymo_motion::skeleton::Skeleton;
+use anymo_tokenizer::owo::SkeletonGraph;
+use anymo_tokenizer::tat::Tat;
+use anymo_tokenizer::tat::window::{Tokens, detokenize, encode_whole};
+use anymo_tokenizer::text::CachedEncoder;
+
+/// Longest motion one request may ask for, in seconds.
+pub const MAX_SECONDS: f64 = 30.0;
+
+/// A request the models cannot serve because of what was asked (an empty prompt, a duration
+/// out of range, a skeleton that cannot be animated), as opposed to a failure of the models:
+/// servers answer it as the client's error.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Refusal(pub String);
+
+/// A refusal as an error.
+fn refuse(message: impl Into<String>) -> anyhow::Error {
+    Refusal(message.into()).into()
+}
+
+/// A user's clip cleaned for the models and at their frame rate, refused with the reason when
+/// it cannot be (the edits, the tokenizer and search by example all read clips this way).
+pub fn cleaned_clip(motion: &Motion) -> Result<CleanClip> {
+    if motion.frames() == 0 {
+        return Err(refuse("the clip has no frames of motion"));
+    }
+    let cleaned =
+        clean(motion, &CleanOptions::default()).map_err(|r| refuse(format!("the clip cannot be used: {r}")))?;
+    Ok(CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned })
+}
+
+/// The frames `seconds` of motion take at the models' frame rate.
+pub fn frames_of(seconds: f64) -> usize {
+    (seconds * MODEL_FPS).round() as usize
+}
+
+/// A skeleton ready to be animated: the user's rest pose, its cleaned form, its graph and
+/// OwO's embedding of it.
+pub struct Target {
+    /// The user's skeleton as a one-frame rest pose (or the user's clip, for edits).
+    pub source: Motion,
+    /// The cleaned skeleton (and motion) the models work on.
+    pub cleaned: CleanClip,
+    /// Its skeleton graph.
+    pub graph: SkeletonGraph,
+    /// OwO's global embedding.
+    pub embedding: Vec<f32>,
+}
+
+/// The tokenizer, a generator and the sentence encoder, loaded once.
+pub struct Studio {
+    /// The tokenizer the generator's codes belong to.
+    pub tat: Tat,
+    /// The generator.
+    pub generator: Generator,
+    /// The sentence encoder (with a cache of node texts).
+    pub encoder: CachedEncoder,
+}
+
+impl Studio {
+    /// Loads a generator checkpoint with the tokenizer it was trained on.
+    pub fn load(generator: &Checkpoint, encoder: CachedEncoder) -> Result<Studio> {
+        let (model, card) = generation::load_generator(generator)?;
+        let mut encoder = encoder;
+        let tat = generator.load_tat_of(&card, &mut encoder)?;
+        let generator = model;
+        Ok(Studio { tat, generator, encoder })
+    }
+
+    /// Frames one token step covers.
+    pub fn frames_per_token(&self) -> usize {
+        self.tat.config().tat.frames_per_token()
+    }
+
+    /// Token steps covering `seconds`, refused outside `(0, MAX_SECONDS]`.
+    pub fn steps(&self, seconds: f64) -> Result<usize> {
+        if !(seconds > 0.0 && seconds <= MAX_SECONDS) {
+            return Err(refuse(format!(
+                "a duration must be more than 0 and at most {MAX_SECONDS} seconds; {seconds} was asked"
+            )));
+        }
+        Ok(frames_of(seconds).div_ceil(self.frames_per_token()).max(1))
+    }
+
+    /// The sentence embedding of a prompt.
+    pub fn text(&mut self, prompt: &str) -> Result<Vec<f32>> {
+        if prompt.trim().is_empty() {
+            return Err(refuse("the prompt is empty"));
+        }
+        Ok(self.encoder.encode(&[prompt])?.remove(0))
+    }
+
+    /// A skeleton to animate, from any skeleton (its rest pose is its offsets).
+    pub fn target(&mut self, skeleton: &Skeleton) -> Result<Target> {
+        let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
+        let cleaned = clean(&rest, &CleanOptions::default())
+            .map_err(|r| refuse(format!("the skeleton cannot be animated: {r}")))?;
+        self.prepare(rest, cleaned)
+    }
+
+    /// A user's clip to edit, with its codes and where it starts.
+    pub fn clip(&mut self, motion: &Motion) -> Result<(Target, Codes, [f32; 3])> {
+        let target = self.prepare(motion.clone(), cleaned_clip(motion)?)?;
+        let encoded = encode_whole(&mut self.tat, &target.graph, &target.cleaned.motion)?;
+        let Tokens { codes, start, .. } = encoded.tokens;
+        Ok((target, codes.into_iter().next().unwrap_or_default(), start))
+    }
+
+    fn prepare(&mut self, source: Motion, cleaned: CleanClip) -> Result<Target> {
+        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
+        let embedding = self.tat.skeleton_embedding(&graph)?;
+        Ok(Target { source, cleaned, graph, embedding })
+    }
+
+    /// New motion for a prompt on a target: `request.samples` code sequences.
+    pub fn generate(&mut self, prompt: &str, target: &Target, request: &Request) -> Result<Vec<Codes>> {
+        let text = self.text(prompt)?;
+        self.generator.generate(&text, &target.embedding, request).map_err(refusal_of)
+    }
+
+    /// New motion for a prompt on a target, rendered: `seconds` long, or as long as the length
+    /// predictor says for the prompt.
+    pub fn generate_motion(
+        &mut self,
+        prompt: &str,
+        target: &Target,
+        seconds: Option<f64>,
+        request: &Request,
+    ) -> Result<Vec<Motion>> {
+        let steps = match seconds {
+            Some(s) => self.steps(s)?,
+            None => {
+                let text = self.text(prompt)?;
+                self.generator.predict_steps(&text, &target.embedding)?
+            }
+        };
+        let samples = self.generate(prompt, target, &Request { steps: Some(steps), ..request.clone() })?;
+        self.render(samples, [0.0; 3], seconds.map(frames_of), target)
+    }
+
+    /// A clip with the span `from..to` seconds regenerated from a prompt and the rest kept.
+    pub fn inpaint(&mut self, clip: &Motion, prompt: &str, span: (f64, f64), request: &Request) -> Result<Vec<Motion>> {
+        let (from, to) = span;
+        if !(from >= 0.0 && to > from) {
+            return Err(refuse(format!("the span must satisfy 0 <= from < to; got {from}..{to}")));
+        }
+        let (target, codes, start) = self.clip(clip)?;
+        let per = self.frames_per_token() as f64 / MODEL_FPS;
+        let duration = target.cleaned.motion.frames() as f64 / MODEL_FPS;
+        if from >= duration {
+            return Err(refuse(format!("the span starts at {from} s but the clip lasts {duration:.2} s")));
+        }
+        let keep: Vec<bool> =
+            (0..codes.len()).map(|t| !((t as f64 + 1.0) * per > from && (t as f64) * per < to)).collect();
+        let text = self.text(prompt)?;
+        let samples = self.generator.inpaint(&text, &target.embedding, &codes, &keep, request).map_err(refusal_of)?;
+        let frames = target.cleaned.motion.frames();
+        self.render(samples, start, Some(frames), &target)
+    }
+
+    /// A clip followed by `seconds` of new motion from a prompt.
+    pub fn extend(&mut self, clip: &Motion, prompt: &str, seconds: f64, request: &Request) -> Result<Vec<Motion>> {
+        let extra = self.steps(seconds)?;
+        let (target, codes, start) = self.clip(clip)?;
+        let text = self.text(prompt)?;
+        let samples = self.generator.extend(&text, &target.embedding, &codes, extra, request).map_err(refusal_of)?;
+        let frames = target.cleaned.motion.frames() + frames_of(seconds);
+        self.render(samples, start, Some(frames), &target)
+    }
+
+    /// Prompts one after another on a skeleton, each `(prompt, seconds)` flowing into the next.
+    pub fn chain(&mut self, skeleton: &Skeleton, parts: &[(String, f64)], request: &Request) -> Result<Vec<Motion>> {
+        self.steps(parts.iter().map(|p| p.1).sum()).map_err(|e| refuse(format!("the chain as a whole: {e}")))?;
+        let target = self.target(skeleton)?;
+        let mut conditions = Vec::with_capacity(parts.len());
+        for (prompt, seconds) in parts {
+            conditions.push((self.text(prompt)?, self.steps(*seconds)?));
+        }
+        let refs: Vec<(&[f32], usize)> = conditions.iter().map(|(t, s)| (t.as_slice(), *s)).collect();
+        let samples = self.generator.chain(&refs, &target.embedding, request).map_err(refusal_of)?;
+        let frames = parts.iter().map(|p| frames_of(p.1)).sum();
+        self.render(samples, [0.0; 3], Some(frames), &target)
+    }
+
+    /// Decodes samples onto the target, cut to `frames` when given, back on the user's skeleton
+    /// and in the user's units.
+    pub fn render(
+        &self,
+        samples: Vec<Codes>,
+        start: [f32; 3],
+        frames: Option<usize>,
+        target: &Target,
+    ) -> Result<Vec<Motion>> {
+        let skeleton = target.cleaned.motion.skeleton();
+        samples
+            .into_iter()
+            .map(|codes| {
+                let mut tokens = Tokens::whole(codes, self.frames_per_token(), MODEL_FPS);
+                tokens.start = start;
+                let decoded = detokenize(&self.tat, &tokens, &target.graph, skeleton)?;
+                let decoded = decoded.slice(0, frames.unwrap_or(decoded.frames()));
+                Ok(target.cleaned.restore(&decoded, &target.source))
+            })
+            .collect()
+    }
+}
+
+/// A generator error, as a refusal when the request caused it.
+fn refusal_of(error: GenerationError) -> anyhow::Error {
+    match error {
+        GenerationError::Model(e) => e.into(),
+        refused => refuse(refused.to_string()),
+    }
+}

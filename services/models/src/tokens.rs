@@ -1,0 +1,108 @@
+//! Motion to TAT tokens and back, on the source skeleton or any other, as users meet it: the
+//! CLI's `tokenize`, `detokenize` and `transfer` and the server's token endpoints use it.
+
+use super::codecs::Graphs;
+use super::data::MODEL_FPS;
+use super::studio::{Refusal, cleaned_clip};
+use crate::checkpoint::Checkpoint;
+use anyhow::Result;
+use anymo_motion::motion::Motion;
+use anymo_motion::prep::clean::{CleanOptions, clean};
+use anymo_motion::skeleton::Skeleton;
+use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
+use anymo_tokenizer::tat::{Tat, anchor};
+use anymo_tokenizer::text::CachedEncoder;
+use serde::{Deserialize, Serialize};
+
+/// The tokens file: the tokens and the checkpoint that made them.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TokenFile {
+    /// The tokenizer checkpoint's name.
+    pub model: String,
+    /// Its training steps (which version of it).
+    pub model_steps: u64,
+    /// The tokens.
+    pub tokens: Tokens,
+}
+
+/// A trained tokenizer with the sentence encoder its skeleton graphs need.
+pub struct TokenCodec {
+    tat: Tat,
+    name: String,
+    steps: u64,
+    encoder: CachedEncoder,
+}
+
+impl TokenCodec {
+    /// Loads a tokenizer checkpoint.
+    pub fn load(tokenizer: &Checkpoint, encoder: CachedEncoder) -> Result<TokenCodec> {
+        let mut encoder = encoder;
+        let (tat, card) = tokenizer.load_tat(&mut encoder)?;
+        Ok(TokenCodec { tat, name: tokenizer.name().to_string(), steps: card.steps, encoder })
+    }
+
+    /// A clip's tokens.
+    pub fn tokenize(&mut self, motion: &Motion) -> Result<TokenFile> {
+        let cleaned = cleaned_clip(motion)?;
+        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
+        let tokens = tokenize(&mut self.tat, &graph, &cleaned.motion)?;
+        Ok(TokenFile { model: self.name.clone(), model_steps: self.steps, tokens })
+    }
+
+    /// Tokens as motion on `skeleton` (in its units, with its hierarchy and channels), refused
+    /// when they do not fit this checkpoint or do not describe a clip.
+    pub fn detokenize(&mut self, tokens: &Tokens, skeleton: &Skeleton) -> Result<Motion> {
+        self.check(tokens).map_err(Refusal)?;
+        let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
+        let cleaned = clean(&rest, &CleanOptions::default())
+            .map_err(|r| Refusal(format!("the skeleton cannot be used as a target: {r}")))?;
+        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
+        let decoded = detokenize(&self.tat, tokens, &graph, cleaned.motion.skeleton())?;
+        Ok(cleaned.restore(&decoded, &rest))
+    }
+
+    /// Why tokens (perhaps from a client) cannot be decoded by this checkpoint, if they cannot:
+    /// the codes must fit its codebooks, every window must hold the same whole number of steps
+    /// and cover the window, the windows must start inside the clip, in order, covering it, and
+    /// the root anchors must lie inside it, in order.
+    fn check(&self, tokens: &Tokens) -> Result<(), String> {
+        let (layers, codes) = (self.tat.config().rvq.layers, self.tat.config().rvq.codes as u32);
+        let per_token = self.tat.config().tat.frames_per_token();
+        let steps = tokens.codes.first().map_or(0, Vec::len);
+        let depth = tokens.codes.first().and_then(|w| w.first()).map_or(0, Vec::len);
+        if steps == 0 || depth == 0 {
+            return Err("the tokens hold no steps".into());
+        }
+        if depth > layers || tokens.codes.iter().flatten().flatten().any(|&c| c >= codes) {
+            return Err(format!("the tokens do not fit checkpoint {} ({layers} layers of {codes} codes)", self.name));
+        }
+        if tokens.codes.iter().any(|w| w.len() != steps || w.iter().any(|step| step.len() != depth)) {
+            return Err(format!("every window must hold {steps} steps of {depth} codes, as the first does"));
+        }
+        if tokens.window != steps * per_token {
+            return Err(format!(
+                "a window of {steps} steps covers {} frames, not {}",
+                steps * per_token,
+                tokens.window
+            ));
+        }
+        let ordered = tokens.starts.first() == Some(&0) && tokens.starts.windows(2).all(|p| p[0] < p[1]);
+        if tokens.starts.len() != tokens.codes.len() || !ordered {
+            return Err("starts must be one ascending first frame per window, from 0".into());
+        }
+        let last = *tokens.starts.last().expect("one start per window");
+        if tokens.frames == 0 || last >= tokens.frames || tokens.frames > last + tokens.window {
+            return Err(format!("{} frames are not covered by windows starting at {:?}", tokens.frames, tokens.starts));
+        }
+        if !(tokens.fps > 0.0 && tokens.fps <= 1000.0 && tokens.start.iter().all(|v| v.is_finite())) {
+            return Err("fps must be in (0, 1000] and the start finite".into());
+        }
+        anchor::check(&tokens.anchors, tokens.frames)
+    }
+
+    /// A clip moved onto `skeleton` through tokens.
+    pub fn transfer(&mut self, motion: &Motion, skeleton: &Skeleton) -> Result<Motion> {
+        let file = self.tokenize(motion)?;
+        self.detokenize(&file.tokens, skeleton)
+    }
+}
