@@ -10,7 +10,7 @@ data=../shared/data
 rm -rf "$out" && mkdir -p "$out/files" "$out/refs"
 : > "$out/files/manifest.tsv"
 anymo=./target/release/anymo
-[ -x "$anymo" ] || cargo build --release -p anymo-services
+[ -x "$anymo" ] || cargo build --release -p anymo-cli
 declare -A skeletons=(
   [human]=bandai/dataset-1/dataset-1_walk_normal_001.bvh.gz
   [horse]=quaternius/bvh/animals_pack/Horse__Walk.bvh.gz

@@ -2,7 +2,7 @@
 test. Run once, in a throwaway virtualenv, never in CI (PyTorch is large):
 
     python3 -m venv /tmp/refenv && /tmp/refenv/bin/pip install sentence-transformers
-    /tmp/refenv/bin/python tools/encoder_reference.py anymo-data/models/all-MiniLM-L6-v2 \
+    /tmp/refenv/bin/python tools/encoder_reference.py ~/.local/share/anymo/models/all-MiniLM-L6-v2 \
         > tokenizer/tests/fixtures/minilm_reference.json
 """
 import json

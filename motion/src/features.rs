@@ -130,38 +130,6 @@ pub fn wrap_angle(a: f32) -> f32 {
     a - two_pi * ((a + std::f32::consts::PI) / two_pi).floor()
 }
 
-/// Joint positions relative to the root in the heading frame, `frames x joints` (encoder input).
-pub fn local_positions(motion: &Motion) -> Vec<Vec3> {
-    let n = motion.skeleton().len();
-    let positions = all_joint_positions(motion);
-    let mut out = Vec::with_capacity(positions.len());
-    for f in 0..motion.frames() {
-        let inverse_heading = Quat::from_rotation_y(-heading_of(motion.rotations(f)[0]));
-        let root = positions[f * n];
-        out.extend(positions[f * n..(f + 1) * n].iter().map(|p| inverse_heading * (*p - root)));
-    }
-    out
-}
-
-/// Foot contacts, `frames x feet` as 0/1: a foot is in contact when it is within `height` of the
-/// floor (y = 0) and moves slower than `speed` (units per frame).
-pub fn foot_contacts(motion: &Motion, feet: &[usize], height: f32, speed: f32) -> Vec<f32> {
-    let n = motion.skeleton().len();
-    let positions = all_joint_positions(motion);
-    let frames = motion.frames();
-    let mut out = Vec::with_capacity(frames * feet.len());
-    for f in 0..frames {
-        for &j in feet {
-            let p = positions[f * n + j];
-            let next = positions[(f + 1).min(frames - 1) * n + j];
-            let prev = positions[f.saturating_sub(1) * n + j];
-            let v = (next - prev).length() / if frames > 1 { 2.0 } else { 1.0 };
-            out.push(if p.y <= height && v <= speed { 1.0 } else { 0.0 });
-        }
-    }
-    out
-}
-
 /// The feet of a motion: leaf joints whose mean height over the clip is within `band` (a
 /// fraction of the diameter) of the lowest leaf's. Taken from the motion, not the rest pose,
 /// since rest poses are not always standing (Bandai's lies on its side).

@@ -76,6 +76,18 @@ fn the_cache_encodes_each_text_once() {
 }
 
 #[test]
+fn the_cache_keeps_the_most_recently_used_texts_up_to_its_capacity() {
+    let Some(encoder) = encoder() else { return };
+    let mut cached = CachedEncoder::with_capacity(encoder, std::num::NonZeroUsize::new(2).unwrap());
+    // A batch larger than the cache is still answered whole, each text by its own embedding.
+    let batch = cached.encode(&["a horse gallops", "a dog sits", "a person waves"]).unwrap();
+    assert_eq!(cached.len(), 2, "the cache holds at most its capacity");
+    let fresh = cached.encode(&["a horse gallops"]).unwrap();
+    assert_eq!(fresh[0], batch[0], "an evicted text is encoded again to the same vector");
+    assert_eq!(cached.len(), 2);
+}
+
+#[test]
 fn a_missing_model_says_how_to_get_it() {
     let err = SentenceEncoder::load("/nonexistent/models/all-MiniLM-L6-v2").err().expect("no model there");
     let message = err.to_string();

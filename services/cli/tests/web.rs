@@ -106,7 +106,7 @@ fn the_page_generates_plays_searches_and_transfers() {
     let broken = scratch.join("broken.bvh");
     std::fs::write(&broken, "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n}\n")
         .unwrap();
-    let screenshots = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/e2e-screenshots");
+    let screenshots = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/e2e-screenshots");
     let out = Command::new("node")
         .arg(e2e.join("page.mjs"))
         .args(["--base", &server.base, "--query", "a horse gallops"])

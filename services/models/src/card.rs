@@ -2,6 +2,7 @@
 //! beside each checkpoint's weights, read as the struct of the kind the caller expects (see
 //! [`crate::checkpoint::Checkpoint::card`]) instead of by string keys.
 
+use crate::train::{CodecTraining, StepTraining};
 use anymo_generator::{EvaluatorConfig, GeneratorConfig};
 use anymo_tokenizer::tat::{BaselineConfig, TokenizerConfig};
 use serde::{Deserialize, Serialize};
@@ -24,9 +25,8 @@ pub struct TokenizerCard {
     pub owo_checkpoint: String,
     /// The model's shape.
     pub tokenizer: TokenizerConfig,
-    /// The training settings, as the run recorded them (kept for people, read by no model).
-    #[serde(default)]
-    pub training: serde_json::Value,
+    /// The training run's settings.
+    pub training: CodecTraining,
 }
 
 fn default_owo() -> String {
@@ -38,9 +38,8 @@ fn default_owo() -> String {
 pub struct BaselineCard {
     /// The model's shape.
     pub baseline: BaselineConfig,
-    /// The training settings, as the run recorded them.
-    #[serde(default)]
-    pub training: serde_json::Value,
+    /// The training run's settings.
+    pub training: CodecTraining,
 }
 
 /// Either codec's card: a checkpoint `anymo eval tokenizer` can measure.
@@ -61,9 +60,8 @@ pub struct GeneratorCard {
     pub trained_on: TokenizerRef,
     /// The model's shape.
     pub generator: GeneratorConfig,
-    /// The training settings, as the run recorded them.
-    #[serde(default)]
-    pub training: serde_json::Value,
+    /// The training run's settings.
+    pub training: StepTraining,
 }
 
 /// The text-motion evaluator's card.
@@ -74,9 +72,8 @@ pub struct EvaluatorCard {
     pub trained_on: TokenizerRef,
     /// The model's shape.
     pub evaluator: EvaluatorConfig,
-    /// The training settings, as the run recorded them.
-    #[serde(default)]
-    pub training: serde_json::Value,
+    /// The training run's settings.
+    pub training: StepTraining,
 }
 
 /// A model trained on a tokenizer's codes.

@@ -6,7 +6,7 @@ use super::codecs::Graphs;
 use super::data::MODEL_FPS;
 use super::generation;
 use crate::checkpoint::Checkpoint;
-use anyhow::Result;
+use crate::error::ModelError;
 use anymo_generator::generate::Codes;
 use anymo_generator::{GenerationError, Generator, Request};
 use anymo_motion::motion::Motion;
@@ -20,16 +20,10 @@ use anymo_tokenizer::text::CachedEncoder;
 /// Longest motion one request may ask for, in seconds.
 pub const MAX_SECONDS: f64 = 30.0;
 
-/// A request the models cannot serve because of what was asked (an empty prompt, a duration
-/// out of range, a skeleton that cannot be animated), as opposed to a failure of the models:
-/// servers answer it as the client's error.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct Refusal(pub String);
+type Result<T, E = ModelError> = std::result::Result<T, E>;
 
-/// A refusal as an error.
-fn refuse(message: impl Into<String>) -> anyhow::Error {
-    Refusal(message.into()).into()
+fn refuse(message: impl Into<String>) -> ModelError {
+    ModelError::refused(message)
 }
 
 /// A user's clip cleaned for the models and at their frame rate, refused with the reason when
@@ -220,7 +214,7 @@ impl Studio {
 }
 
 /// A generator error, as a refusal when the request caused it.
-fn refusal_of(error: GenerationError) -> anyhow::Error {
+fn refusal_of(error: GenerationError) -> ModelError {
     match error {
         GenerationError::Model(e) => e.into(),
         refused => refuse(refused.to_string()),

@@ -3,9 +3,9 @@
 
 use super::codecs::Graphs;
 use super::data::MODEL_FPS;
-use super::studio::{Refusal, cleaned_clip};
+use super::studio::cleaned_clip;
 use crate::checkpoint::Checkpoint;
-use anyhow::Result;
+use crate::error::ModelError;
 use anymo_motion::motion::Motion;
 use anymo_motion::prep::clean::{CleanOptions, clean};
 use anymo_motion::skeleton::Skeleton;
@@ -13,6 +13,8 @@ use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
 use anymo_tokenizer::tat::{Tat, anchor};
 use anymo_tokenizer::text::CachedEncoder;
 use serde::{Deserialize, Serialize};
+
+type Result<T, E = ModelError> = std::result::Result<T, E>;
 
 /// The tokens file: the tokens and the checkpoint that made them.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -35,7 +37,7 @@ pub struct TokenCodec {
 
 impl TokenCodec {
     /// Loads a tokenizer checkpoint.
-    pub fn load(tokenizer: &Checkpoint, encoder: CachedEncoder) -> Result<TokenCodec> {
+    pub fn load(tokenizer: &Checkpoint, encoder: CachedEncoder) -> anyhow::Result<TokenCodec> {
         let mut encoder = encoder;
         let (tat, card) = tokenizer.load_tat(&mut encoder)?;
         Ok(TokenCodec { tat, name: tokenizer.name().to_string(), steps: card.steps, encoder })
@@ -52,10 +54,10 @@ impl TokenCodec {
     /// Tokens as motion on `skeleton` (in its units, with its hierarchy and channels), refused
     /// when they do not fit this checkpoint or do not describe a clip.
     pub fn detokenize(&mut self, tokens: &Tokens, skeleton: &Skeleton) -> Result<Motion> {
-        self.check(tokens).map_err(Refusal)?;
+        self.check(tokens).map_err(ModelError::Refused)?;
         let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
         let cleaned = clean(&rest, &CleanOptions::default())
-            .map_err(|r| Refusal(format!("the skeleton cannot be used as a target: {r}")))?;
+            .map_err(|r| ModelError::refused(format!("the skeleton cannot be used as a target: {r}")))?;
         let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
         let decoded = detokenize(&self.tat, tokens, &graph, cleaned.motion.skeleton())?;
         Ok(cleaned.restore(&decoded, &rest))

@@ -196,11 +196,21 @@ pub struct CodecTraining {
     pub batch_size: usize,
     /// Joints over all windows of a batch, at most.
     pub max_batch_joints: usize,
-    /// Seconds between saves of the run state.
+    /// Seconds between saves of the run state (cards from before it was recorded: 120).
+    #[serde(default = "default_save_every_seconds")]
     pub save_every_seconds: u64,
     /// Probability of rebasing a window's rest pose (cards that do not record it were trained
     /// with 0.5).
+    #[serde(default = "default_rebase")]
     pub rebase: f64,
+}
+
+fn default_save_every_seconds() -> u64 {
+    120
+}
+
+fn default_rebase() -> f64 {
+    0.5
 }
 
 /// Running means of the loss terms, for the progress bar.
@@ -367,7 +377,7 @@ pub fn train_steps<M>(
 }
 
 /// Writes a shipped checkpoint: weights and model card side by side.
-pub fn ship(params: &Params, card: &ModelCard, dir: &Path, name: &str) -> Result<()> {
+pub fn ship<C: Serialize>(params: &Params, card: &ModelCard<C>, dir: &Path, name: &str) -> Result<()> {
     std::fs::create_dir_all(dir)?;
     params.save(&dir.join(format!("{name}.safetensors")))?;
     card.save(&dir.join(format!("{name}.json")))?;

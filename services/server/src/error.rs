@@ -2,7 +2,7 @@
 //! can act on, answered as JSON `{"error": {"code", "message"}}` over REST and as a status with
 //! the same message over gRPC.
 
-use anymo_models::studio::Refusal;
+use anymo_models::error::ModelError;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
@@ -53,7 +53,7 @@ impl ApiError {
         ApiError::new(StatusCode::BAD_REQUEST, "bad_bvh", format!("{what} is not a valid BVH file: {error}"))
     }
 
-    /// A well-formed request the models cannot serve (see [`Refusal`]).
+    /// A well-formed request the models cannot serve (see [`ModelError::Refused`]).
     pub fn refused(message: impl Into<String>) -> ApiError {
         ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "refused", message)
     }
@@ -118,12 +118,12 @@ impl ApiError {
     }
 
     /// A model operation's error: a refusal is the client's, anything else the server's.
-    pub fn from_model(error: anyhow::Error) -> ApiError {
-        match error.downcast_ref::<Refusal>() {
-            Some(refusal) => ApiError::refused(refusal.0.clone()),
-            None => {
-                tracing::error!("model failure: {error:#}");
-                ApiError::internal(format!("{error:#}"))
+    pub fn from_model(error: ModelError) -> ApiError {
+        match error {
+            ModelError::Refused(message) => ApiError::refused(message),
+            failure => {
+                tracing::error!("model failure: {failure}");
+                ApiError::internal(failure.to_string())
             }
         }
     }

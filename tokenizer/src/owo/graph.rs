@@ -183,11 +183,6 @@ impl GraphBatch {
             ranges,
         })
     }
-
-    /// Number of nodes.
-    pub fn node_count(&self) -> usize {
-        self.ranges.last().map_or(0, |(s, j)| s + j + 1)
-    }
 }
 
 #[cfg(test)]

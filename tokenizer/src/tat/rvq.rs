@@ -178,21 +178,6 @@ impl Rvq {
         }
     }
 
-    /// Fraction of codes per layer used by `codes` (a health figure for training logs).
-    pub fn usage_of(&self, codes: &[Vec<u32>]) -> Vec<f32> {
-        (0..self.config.layers)
-            .map(|layer| {
-                let mut seen = vec![false; self.config.codes];
-                for row in codes {
-                    if let Some(&c) = row.get(layer) {
-                        seen[c as usize] = true;
-                    }
-                }
-                seen.iter().filter(|s| **s).count() as f32 / self.config.codes as f32
-            })
-            .collect()
-    }
-
     /// Stores the codebooks and their statistics as buffers of `params` under `prefix`.
     pub fn save_into(&self, params: &mut Params, prefix: &str) -> Result<()> {
         let (k, dim) = (self.config.codes, self.config.dim);

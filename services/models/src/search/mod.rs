@@ -3,12 +3,11 @@
 //! the tokenizer's latents (so a clip on any skeleton lands in one space), and queries become
 //! vectors in both spaces.
 
-pub mod evaluate;
-
 use crate::checkpoint::Checkpoint;
 use crate::codecs::Graphs;
+use crate::error::ModelError;
 use crate::generation;
-use crate::studio::{Refusal, cleaned_clip};
+use crate::studio::cleaned_clip;
 use anyhow::{Context, Result};
 use anymo_generator::Evaluator;
 use anymo_motion::motion::Motion;
@@ -82,7 +81,7 @@ impl SearchModels {
 
     /// A text's vectors: its sentence embedding (caption space) and the evaluator's projection of
     /// it (motion space).
-    pub fn text_vectors(&mut self, text: &str) -> Result<(Vec<f32>, Vec<f32>)> {
+    pub fn text_vectors(&mut self, text: &str) -> Result<(Vec<f32>, Vec<f32>), ModelError> {
         let sentence = self.encoder.encode(&[text])?.remove(0);
         let motion = self.evaluator.embed_sentence(&sentence)?;
         Ok((unit(sentence), unit(motion)))
@@ -90,16 +89,16 @@ impl SearchModels {
 
     /// A clip's motion embedding: cleaned and resampled as for the models, then
     /// [`SearchModels::embed_cleaned`].
-    pub fn motion_vector(&mut self, motion: &Motion) -> Result<Vec<f32>> {
+    pub fn motion_vector(&mut self, motion: &Motion) -> Result<Vec<f32>, ModelError> {
         self.embed_cleaned(&cleaned_clip(motion)?.motion)
     }
 
     /// The motion embedding of a clip already cleaned and at the models' frame rate: encoded
     /// whole by the tokenizer, embedded window by window (the evaluator reads at most its
     /// `max_tokens` steps at once) and averaged, weighted by window length.
-    pub fn embed_cleaned(&mut self, motion: &Motion) -> Result<Vec<f32>> {
+    pub fn embed_cleaned(&mut self, motion: &Motion) -> Result<Vec<f32>, ModelError> {
         if motion.frames() < 2 {
-            return Err(Refusal("the clip is too short to search by (it needs at least two frames)".into()).into());
+            return Err(ModelError::refused("the clip is too short to search by (it needs at least two frames)"));
         }
         let graph = Graphs::new(&mut self.encoder).of(motion.skeleton())?;
         let latent = encode_whole(&mut self.tat, &graph, motion)?.latent;
@@ -122,7 +121,7 @@ impl SearchModels {
         filter: Filter,
         weights: Weights,
         page: (usize, usize),
-    ) -> Result<Query> {
+    ) -> Result<Query, ModelError> {
         let text = text.map(str::trim).filter(|t| !t.is_empty());
         let (caption_vector, text_motion) = match text {
             Some(t) => {
@@ -132,7 +131,7 @@ impl SearchModels {
             None => (None, None),
         };
         let motion_vector = match like {
-            Some(m) => Some(self.motion_vector(m).context("embedding the example clip")?),
+            Some(m) => Some(self.motion_vector(m)?),
             None => text_motion,
         };
         Ok(Query {
@@ -152,7 +151,7 @@ impl SearchModels {
         let clip = &record.clip;
         let caption_vector = caption_vector(&record.caption_embeddings);
         let motion_vector = anymo_motion::bvh::read(bvh, anymo_motion::bvh::ReadOptions { require_motion: true })
-            .map_err(anyhow::Error::from)
+            .map_err(|e| ModelError::Failed(e.into()))
             .and_then(|b| self.motion_vector(&Motion::from_bvh(&b)));
         let (motion_vector, problem) = match motion_vector {
             Ok(v) => (Some(v), None),

@@ -3,8 +3,11 @@
 //! consistency, foot skating and ground penetration of transfers, and NEC appendix F's
 //! correlation of pairwise motion distances before and after transfer).
 
-use super::codecs::Graphs;
-use super::data::ModelClip;
+use super::{Table, f};
+use crate::card::CodecCard;
+use crate::checkpoint::Checkpoints;
+use crate::codecs::{self, Graphs};
+use crate::data::ModelClip;
 use anyhow::Result;
 use anymo_motion::features::{canonicalise, foot_joints};
 use anymo_motion::kinematics::all_joint_positions;
@@ -13,8 +16,10 @@ use anymo_motion::metrics::{
     mpjpe_root_aligned, mpjpe_yaw_aligned,
 };
 use anymo_motion::motion::Motion;
+use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
 use anymo_tokenizer::tat::{Codec, Tat};
+use anymo_tokenizer::text::CachedEncoder;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -325,4 +330,216 @@ pub fn transfer(
         gp: gp / frames,
         distance_correlation: pearson(&pairwise(&originals), &pairwise(&transferred)),
     })
+}
+
+/// The reference row's name: each clip held in its mean pose (see [`static_pose`]).
+pub const STATIC_REFERENCE: &str = "static pose (reference)";
+
+/// The baseline's windows when measured (its card has none: NEC Table 1's protocol).
+const BASELINE_WINDOW: usize = 64;
+/// The overlap of the baseline's windows.
+const BASELINE_OVERLAP: usize = 16;
+
+/// What `anymo eval tokenizer` measures.
+pub struct TokenizerReport {
+    /// The reconstruction tables (per split, per source, GeoDist by joint kind) and, when TAT
+    /// was measured, its transfer table, as Markdown.
+    pub markdown: String,
+    /// Each model's scores per split and per source, then the static reference's, by name.
+    pub reconstruction: Vec<(String, serde_json::Map<String, serde_json::Value>)>,
+    /// TAT's transfers, when `tat` was among the models.
+    pub transfer: Option<Vec<TransferScores>>,
+}
+
+impl TokenizerReport {
+    /// The whole report as one JSON object, with the command that made it.
+    pub fn json(&self, command: &str) -> Result<serde_json::Value> {
+        let mut out: serde_json::Map<String, serde_json::Value> =
+            self.reconstruction.iter().map(|(k, v)| (k.clone(), serde_json::Value::Object(v.clone()))).collect();
+        if let Some(transfer) = &self.transfer {
+            out.insert("transfer".into(), serde_json::to_value(transfer)?);
+        }
+        out.insert("command".into(), command.into());
+        Ok(serde_json::Value::Object(out))
+    }
+}
+
+/// Reconstruction of the test and zero-shot clips of `clips` by each named codec of `set`,
+/// beside the static reference, and, when `tat` is among them, its transfers
+/// (`transfer_clips` source clips per direction).
+pub fn evaluate_tokenizers(
+    set: &Checkpoints,
+    names: &[String],
+    clips: &[ModelClip],
+    transfer_clips: usize,
+    encoder: &mut CachedEncoder,
+) -> Result<TokenizerReport> {
+    let eval_clips: Vec<&ModelClip> = clips.iter().filter(|c| c.split != Split::Train).collect();
+    eprintln!("{} test and zero-shot clips", eval_clips.len());
+    let mut tables = Tables::default();
+    let mut reconstruction = Vec::new();
+    for name in names {
+        let (mut codec, card) = codecs::load(&set.get(name), encoder)?;
+        let (window, overlap) = match &card.config {
+            CodecCard::Tokenizer(t) => (t.tokenizer.window, t.tokenizer.overlap),
+            CodecCard::Baseline(_) => (BASELINE_WINDOW, BASELINE_OVERLAP),
+        };
+        let mut graphs = Graphs::new(encoder);
+        let rec = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, window, overlap)?;
+        reconstruction.push((name.clone(), tables.add(name, &rec)?));
+    }
+    let reference = static_reference(&eval_clips);
+    reconstruction.push((STATIC_REFERENCE.to_string(), tables.add(STATIC_REFERENCE, &reference)?));
+    let Tables { table, per_source, by_kind } = tables;
+    let mut markdown = format!("{}\n{}\n{}", table.into_text(), per_source.into_text(), by_kind.into_text());
+    let transfer = if names.iter().any(|m| m == "tat") {
+        let transfers = transfers(set, clips, transfer_clips, encoder)?;
+        markdown.push_str(&format!("\n{}", transfer_table(&transfers)));
+        Some(transfers)
+    } else {
+        None
+    };
+    Ok(TokenizerReport { markdown, reconstruction, transfer })
+}
+
+/// The transfer table, as Markdown.
+fn transfer_table(transfers: &[TransferScores]) -> String {
+    let mut t = Table::new(&[
+        "transfer",
+        "target",
+        "clips",
+        "cycle MPJPE",
+        "reconstruction MPJPE",
+        "FS",
+        "GP",
+        "distance correlation",
+    ]);
+    for s in transfers {
+        t.row(&[
+            s.name.clone(),
+            s.target.clone(),
+            s.clips.to_string(),
+            f(s.cycle_mpjpe),
+            f(s.reconstruction_mpjpe),
+            f(s.fs),
+            f(s.gp),
+            format!("{:.3}", s.distance_correlation),
+        ]);
+    }
+    t.into_text()
+}
+
+/// The reconstruction tables, per split and per source, as Markdown.
+struct Tables {
+    table: Table,
+    per_source: Table,
+    by_kind: Table,
+}
+
+/// The columns every reconstruction row has, after its model and split (and source).
+const SCORES: [&str; 7] = [
+    "clips",
+    "MPJPE",
+    "MPJPE (yaw aligned)",
+    "MPJPE (free root)",
+    "MPJPE (with trans)",
+    "GeoDist (deg)",
+    "GeoDist (free root)",
+];
+
+impl Default for Tables {
+    fn default() -> Self {
+        let columns = |first: &[&'static str], last: &[&'static str]| -> Vec<&'static str> {
+            first.iter().chain(&SCORES).chain(last).copied().collect()
+        };
+        Tables {
+            table: Table::new(&columns(&["model", "split"], &["FS", "GP", "FS (GT)", "GP (GT)"])),
+            per_source: Table::new(&columns(&["model", "split", "source"], &[])),
+            by_kind: Table::new(&[
+                "model",
+                "split",
+                "GeoDist (deg)",
+                "root",
+                "joints that move joints",
+                "joints that move none",
+            ]),
+        }
+    }
+}
+
+/// The cells of [`SCORES`].
+fn score_cells(s: &Scores) -> Vec<String> {
+    vec![
+        s.clips.to_string(),
+        f(s.mpjpe),
+        f(s.mpjpe_yaw),
+        f(s.mpjpe_free),
+        f(s.mpjpe_trans),
+        format!("{:.2}", s.geodist),
+        format!("{:.2}", s.geodist_free),
+    ]
+}
+
+impl Tables {
+    /// Adds one model's rows; returns its scores per split and per source, as JSON.
+    fn add(&mut self, name: &str, rec: &Reconstruction) -> Result<serde_json::Map<String, serde_json::Value>> {
+        let mut by_split: BTreeMap<String, Sums> = BTreeMap::new();
+        let mut model_json = serde_json::Map::new();
+        for ((split, source), sums) in &rec.groups {
+            by_split.entry(split.clone()).or_default().merge(sums);
+            let s = sums.scores();
+            self.per_source.row(&[&[name.to_string(), split.clone(), source.clone()][..], &score_cells(&s)].concat());
+            model_json.insert(format!("{split}/{source}"), serde_json::to_value(s)?);
+        }
+        for (split, sums) in &by_split {
+            let s = sums.scores();
+            let truth = [f(s.fs), f(s.gp), f(s.fs_truth), f(s.gp_truth)];
+            self.table.row(&[&[name.to_string(), split.clone()][..], &score_cells(&s), &truth].concat());
+            let kinds = [s.geodist, s.geodist_root, s.geodist_inner, s.geodist_unseen].map(|g| format!("{g:.2}"));
+            self.by_kind.row(&[&[name.to_string(), split.clone()][..], &kinds].concat());
+            model_json.insert(split.clone(), serde_json::to_value(s)?);
+        }
+        if rec.refused > 0 {
+            let mut cells = vec![name.to_string(), "refused".into(), rec.refused.to_string()];
+            cells.push("(skeleton larger than the model takes)".into());
+            cells.resize(SCORES.len() + 6, String::new());
+            self.table.row(&cells);
+            model_json.insert("refused".into(), rec.refused.into());
+        }
+        Ok(model_json)
+    }
+}
+
+/// Human -> human of other proportions, human -> quadruped, quadruped -> quadruped, each from
+/// test clips onto a skeleton of another subject.
+fn transfers(
+    set: &Checkpoints,
+    clips: &[ModelClip],
+    per_direction: usize,
+    encoder: &mut CachedEncoder,
+) -> Result<Vec<TransferScores>> {
+    let (mut tat, _) = set.get("tat").load_tat(encoder)?;
+    let mut graphs = Graphs::new(encoder);
+    let pick = |source: &str, split: Split| -> Vec<&ModelClip> {
+        clips.iter().filter(|c| c.item.source == source && c.split == split).take(per_direction).collect()
+    };
+    let first = |subject: &str| clips.iter().find(|c| c.item.subject == subject);
+    let humans = pick("bandai-namco-dataset-2", Split::Test);
+    let horses: Vec<&ModelClip> =
+        clips.iter().filter(|c| c.item.subject == "horse" && c.split != Split::Train).take(per_direction).collect();
+    let mut out = Vec::new();
+    let plans: [(&str, &Vec<&ModelClip>, Option<&ModelClip>); 4] = [
+        ("human -> human (CMU rig)", &humans, clips.iter().find(|c| c.item.source == "cmu-mocap")),
+        ("human -> human (Xia rig)", &humans, clips.iter().find(|c| c.item.source == "xia-style")),
+        ("human -> quadruped", &humans, first("horse")),
+        ("quadruped -> quadruped", &horses, first("wolf")),
+    ];
+    for (name, sources, target) in plans {
+        let Some(target) = target else { continue };
+        if sources.is_empty() {
+            continue;
+        }
+        out.push(transfer(&mut tat, &mut graphs, name, sources, target)?);
+    }
+    Ok(out)
 }

@@ -4,9 +4,10 @@
 //! any of its captions, held out or not, equals the query. Motion to motion: each clip's motion
 //! embedding as the query, itself left out, clips sharing a caption relevant.
 
-use super::{SearchModels, caption_vector};
+use super::Table;
 use crate::data::{MODEL_FPS, ModelClip};
 use crate::generation::is_human;
+use crate::search::{SearchModels, caption_vector};
 use anyhow::Result;
 use anymo_motion::prep::labels::label_skeleton;
 use anymo_retrieval::library::MAX_LIMIT;
@@ -164,4 +165,24 @@ pub fn evaluate(models: &mut SearchModels, clips: &[&ModelClip], hybrid: Weights
         });
     }
     Ok(rows)
+}
+
+/// The rows as a Markdown table.
+pub fn markdown(rows: &[RetrievalRow]) -> String {
+    let mut table =
+        Table::new(&["task", "retrievers", "queries", "queries' subjects", "R@1", "R@5", "R@10", "median rank"]);
+    for r in rows {
+        let s = &r.summary;
+        table.row(&[
+            r.task.to_string(),
+            r.retrievers.to_string(),
+            s.queries.to_string(),
+            r.subset.to_string(),
+            format!("{:.3}", s.r1),
+            format!("{:.3}", s.r5),
+            format!("{:.3}", s.r10),
+            s.median_rank.to_string(),
+        ]);
+    }
+    table.into_text()
 }

@@ -3,10 +3,12 @@
 //! beside the real motion (the GT row, the ceiling): R-Precision top-1/2/3 in groups of 32,
 //! FID, MM-Dist, foot skating and ground penetration, for all clips, humans and animals.
 
-use super::codecs::Graphs;
-use super::data::ModelClip;
-use super::evaluate::{CONTACT_HEIGHT, FOOT_BAND};
-use super::generation::{is_human, token_clips};
+use super::Table;
+use super::tokenizer::{CONTACT_HEIGHT, FOOT_BAND};
+use crate::checkpoint::Checkpoints;
+use crate::codecs::Graphs;
+use crate::data::ModelClip;
+use crate::generation::{self, is_human, token_clips};
 use anyhow::Result;
 use anymo_generator::evaluator::{fid, mm_dist, r_precision};
 use anymo_generator::generate::Codes;
@@ -184,4 +186,56 @@ fn table(model: &str, scored: &[Scored], truth: &[Scored], seconds: f64) -> Vec<
             })
         })
         .collect()
+}
+
+/// Loads the evaluator `evaluator` and each generator of `models` from `set` (each with the
+/// tokenizer its card names) and scores them on `test` (see [`evaluate`]).
+pub fn evaluate_generators(
+    set: &Checkpoints,
+    evaluator: &str,
+    models: &[String],
+    test: &[&ModelClip],
+    encoder: &mut CachedEncoder,
+    sampling: Sampling,
+    seed: u64,
+) -> Result<Vec<Row>> {
+    let evaluator_checkpoint = set.get(evaluator);
+    let (evaluator, evaluator_card) = generation::load_evaluator(&evaluator_checkpoint)?;
+    let mut tat = evaluator_checkpoint.load_tat_of(&evaluator_card, encoder)?;
+    let mut loaded = Vec::new();
+    for name in models {
+        let checkpoint = set.get(name);
+        let (generator, card) = generation::load_generator(&checkpoint)?;
+        let tokenizer = checkpoint.load_tat_of(&card, encoder)?;
+        eprintln!("{name}: {} steps", card.steps);
+        loaded.push((name.clone(), generator, tokenizer));
+    }
+    let candidates: Vec<Candidate> = loaded
+        .iter()
+        .map(|(name, generator, tokenizer)| Candidate { name: name.clone(), generator, tokenizer })
+        .collect();
+    evaluate(&mut tat, &evaluator, &candidates, test, encoder, sampling, seed)
+}
+
+/// The rows as a Markdown table.
+pub fn markdown(rows: &[Row]) -> String {
+    let mut table = Table::new(&["model", "clips", "R@1", "R@2", "R@3", "FID", "MM-Dist", "FS", "GP", "s/clip"]);
+    fn three(x: impl std::fmt::Display) -> String {
+        format!("{x:.3}")
+    }
+    for r in rows {
+        table.row(&[
+            format!("{} ({})", r.model, r.subset),
+            r.clips.to_string(),
+            three(r.r_precision[0]),
+            three(r.r_precision[1]),
+            three(r.r_precision[2]),
+            three(r.fid),
+            three(r.mm_dist),
+            format!("{:.4}", r.foot_skating),
+            format!("{:.4}", r.ground_penetration),
+            three(r.seconds_per_clip),
+        ]);
+    }
+    table.into_text()
 }

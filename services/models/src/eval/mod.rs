@@ -1,0 +1,62 @@
+//! The evaluations of `../shared/docs/EVAL.md`, each a report with its Markdown tables and its
+//! figures as JSON: the tokenizers' reconstruction and transfer ([`tokenizer`]), text to motion
+//! ([`generator`]) and search ([`retrieval`]). The metrics themselves are the domain crates'
+//! (`anymo_motion::metrics`, `anymo_generator::evaluator`, `anymo_retrieval::metrics`); these
+//! modules are the protocols that choose the clips, run the models and tabulate.
+
+pub mod generator;
+pub mod retrieval;
+pub mod tokenizer;
+
+use crate::checkpoint::Checkpoint;
+use crate::data::{self, ModelClip};
+use anyhow::{Context, Result};
+use anymo_tokenizer::dataset::Split;
+use anymo_tokenizer::nn::load_card;
+use std::path::Path;
+
+/// The usable clips of a manifest (at most `limit` per split), with how many cleaning rejected.
+pub fn clips(manifest: &Path, limit: Option<usize>) -> Result<(Vec<ModelClip>, usize)> {
+    data::load_manifest(manifest, limit).with_context(|| format!("reading the manifest {}", manifest.display()))
+}
+
+/// The usable clips of the test split (at most `limit` per split of the manifest).
+pub fn test_clips(manifest: &Path, limit: Option<usize>) -> Result<Vec<ModelClip>> {
+    let (clips, rejected) = clips(manifest, limit)?;
+    let test: Vec<ModelClip> = clips.into_iter().filter(|c| c.split == Split::Test).collect();
+    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
+    Ok(test)
+}
+
+/// Updates the figures in the model card of checkpoint `name` in the folder `dir`.
+pub fn record(dir: &Path, name: &str, update: impl FnOnce(&mut serde_json::Value)) -> Result<()> {
+    let (_, path) = Checkpoint::in_dir(dir, name).files().expect("a folder's checkpoint has files");
+    let mut card = load_card(&path)?;
+    update(&mut card.metrics);
+    card.save(&path).with_context(|| format!("writing {}", path.display()))
+}
+
+/// A number as the tables print distances.
+fn f(x: f64) -> String {
+    format!("{x:.4}")
+}
+
+/// A Markdown table, built row by row.
+struct Table(String);
+
+impl Table {
+    /// A table with these column headers and no rows.
+    fn new(headers: &[&str]) -> Table {
+        Table(format!("| {} |\n|{}\n", headers.join(" | "), "---|".repeat(headers.len())))
+    }
+
+    /// Appends a row of cells.
+    fn row(&mut self, cells: &[String]) {
+        self.0.push_str(&format!("| {} |\n", cells.join(" | ")));
+    }
+
+    /// The table's text.
+    fn into_text(self) -> String {
+        self.0
+    }
+}
