@@ -5,11 +5,11 @@ use anymo_motion::bvh::{self, ReadOptions};
 use anymo_motion::features::{canonicalise, from_features, to_features};
 use anymo_motion::kinematics::all_joint_positions;
 use anymo_motion::motion::Motion;
-use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones};
+use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones, turn_joint_frames};
 use anymo_motion::prep::clean::{CleanOptions, Rejection, clean};
 use anymo_motion::prep::labels::{label_skeleton, mirror_pairs};
 use anymo_tests::{data_dir, files_with_suffix};
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -106,6 +106,36 @@ fn rebasing_the_rest_pose_keeps_every_position() {
         assert_ne!(rebased.skeleton(), motion.skeleton());
         let worst = worst_distance(&all_joint_positions(&motion), &all_joint_positions(&rebased));
         assert!(worst < 1e-4 * motion.skeleton().diameter().max(1.0), "{}: {worst}", path.display());
+    }
+}
+
+#[test]
+fn turning_joint_frames_keeps_every_position_and_turns_back() {
+    let Some(files) = corpus_sample(29) else { return };
+    for (k, path) in files.iter().enumerate() {
+        let motion = load(path);
+        let n = motion.skeleton().len();
+        // Seeded, arbitrary turns: each joint's frame about its own axis by its own angle.
+        let turns: Vec<Quat> = (0..n)
+            .map(|j| {
+                let a = (j * 7 + k * 3) as f32;
+                Quat::from_axis_angle(Vec3::new(a.sin(), a.cos(), 0.3 + (a * 0.5).sin()).normalize(), 0.4 + a % 2.7)
+            })
+            .collect();
+        let turned = turn_joint_frames(&motion, &turns);
+        assert_ne!(turned.skeleton(), motion.skeleton(), "{}: the rig's conventions change", path.display());
+        let worst = worst_distance(&all_joint_positions(&motion), &all_joint_positions(&turned));
+        assert!(worst < 1e-4 * motion.skeleton().diameter().max(1.0), "{}: {worst}", path.display());
+        let inverse: Vec<Quat> = turns.iter().map(|q| q.inverse()).collect();
+        let back = turn_joint_frames(&turned, &inverse);
+        let angle = back
+            .all_rotations()
+            .iter()
+            .zip(motion.all_rotations())
+            .map(|(a, b)| a.angle_between(*b))
+            .fold(0.0f32, f32::max);
+        // f32 products and the arccos near 1 cost about a milliradian; a wrong turn costs radians.
+        assert!(angle < 5e-3, "{}: turning back is off by {angle} rad", path.display());
     }
 }
 

@@ -46,6 +46,31 @@ pub fn mpjpe_yaw_aligned(predicted: &[Vec3], truth: &[Vec3], joints: usize) -> f
     mean(errors)
 }
 
+/// The mean angle (degrees) by which the predicted body is turned against the truth: per frame,
+/// the angle of the rotation that best fits the predicted root-relative joint positions onto the
+/// truth's (least squares, Kabsch), averaged over frames. A reconstruction that keeps the pose
+/// scores near 0; a body turned about the vertical, tipped nose-up, or with its spine reversed
+/// scores the size of that turn, whichever joint carries it, where MPJPE would only average it.
+pub fn body_turn_deg(predicted: &[Vec3], truth: &[Vec3], joints: usize) -> f32 {
+    assert_eq!(predicted.len(), truth.len(), "same frames and joints");
+    let angles = predicted.chunks(joints).zip(truth.chunks(joints)).map(|(p, t)| {
+        let (pr, tr) = (p[0], t[0]);
+        let mut h = nalgebra::Matrix3::<f64>::zeros();
+        for (a, b) in p.iter().zip(t) {
+            let (a, b) = (*a - pr, *b - tr);
+            h += nalgebra::Vector3::new(a.x as f64, a.y as f64, a.z as f64)
+                * nalgebra::RowVector3::new(b.x as f64, b.y as f64, b.z as f64);
+        }
+        let svd = h.svd(true, true);
+        let (u, v_t) = (svd.u.expect("asked for U"), svd.v_t.expect("asked for V^T"));
+        let mut d = nalgebra::Matrix3::<f64>::identity();
+        d[(2, 2)] = (v_t.transpose() * u.transpose()).determinant().signum();
+        let r = v_t.transpose() * d * u.transpose();
+        (((r.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees()) as f32
+    });
+    mean(angles)
+}
+
 /// Mean geodesic angle in degrees between corresponding local rotations.
 pub fn geodesic_distance_deg(predicted: &[Quat], truth: &[Quat]) -> f32 {
     assert_eq!(predicted.len(), truth.len(), "same frames and joints");
@@ -213,6 +238,19 @@ mod tests {
         let fs = foot_skating(&p, 1, &[0], 10.0, 0.02);
         assert!((fs - 1.0).abs() < 1e-5, "{fs}");
         assert_eq!(foot_skating(&p, 1, &[0], 10.0, 0.001), 0.0);
+    }
+
+    #[test]
+    fn body_turn_is_the_angle_of_the_best_fitting_rotation() {
+        let truth = [Vec3::ZERO, Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(0.0, 0.0, 2.0)];
+        assert!(body_turn_deg(&truth, &truth, 4) < 1e-3);
+        for (axis, degrees) in [(Vec3::Y, 140.0f32), (Vec3::X, 40.0), (Vec3::new(1.0, 1.0, 0.0).normalize(), 170.0)] {
+            let turn = Quat::from_axis_angle(axis, degrees.to_radians());
+            // Shifted too: the root's position does not count.
+            let turned: Vec<Vec3> = truth.iter().map(|p| turn * *p + Vec3::new(3.0, 0.0, -1.0)).collect();
+            let got = body_turn_deg(&turned, &truth, 4);
+            assert!((got - degrees).abs() < 0.01, "{axis} by {degrees}: {got}");
+        }
     }
 
     #[test]

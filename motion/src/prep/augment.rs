@@ -3,7 +3,7 @@
 //! choices as arguments, so the caller's seeded generator decides and results are reproducible.
 
 use super::labels::{label_skeleton, mirror_pairs};
-use crate::kinematics::{Transform, all_global_transforms};
+use crate::kinematics::all_global_transforms;
 use crate::motion::Motion;
 use crate::skeleton::{Joint, Skeleton};
 use glam::{Quat, Vec3};
@@ -25,39 +25,44 @@ pub enum MirrorError {
 /// positions in every frame are unchanged; offsets and local rotations change, which teaches a
 /// model that the same motion can be written on many rest poses.
 pub fn rebase_rest_pose(motion: &Motion, base_frame: usize) -> Motion {
+    let n = motion.skeleton().len();
+    let globals = all_global_transforms(motion);
+    let turns: Vec<Quat> = globals[base_frame * n..(base_frame + 1) * n].iter().map(|t| t.rotation.inverse()).collect();
+    turn_joint_frames(motion, &turns)
+}
+
+/// Re-expresses a motion on a rig whose joint frames are turned: joint `j`'s frame becomes
+/// `F_j * turns[j]`, as if the rig had been built with other local axes. Every joint's world
+/// position in every frame is unchanged (exactly, up to rounding); the offsets, end sites, rest
+/// pose and local rotations change (`R'_j = turns[parent]^-1 R_j turns[j]`). This is how the
+/// same motion looks on rigs of other conventions, which a tokenizer must not tell apart.
+pub fn turn_joint_frames(motion: &Motion, turns: &[Quat]) -> Motion {
     let skeleton = motion.skeleton();
     let n = skeleton.len();
-    let globals = all_global_transforms(motion);
-    let base: Vec<Transform> = globals[base_frame * n..(base_frame + 1) * n].to_vec();
-    let parent_base = |j: usize| skeleton.joint(j).parent.map_or(Quat::IDENTITY, |p| base[p].rotation);
-
+    assert_eq!(turns.len(), n, "one turn per joint");
+    let parent_turn = |j: usize| skeleton.joint(j).parent.map_or(Quat::IDENTITY, |p| turns[p]);
     let joints: Vec<Joint> = skeleton
         .joints()
         .iter()
         .enumerate()
         .map(|(j, joint)| Joint {
-            offset: if j == 0 { joint.offset } else { parent_base(j) * motion.translations(base_frame)[j] },
-            end_site: joint.end_site.map(|e| base[j].rotation * e),
+            offset: if j == 0 { joint.offset } else { parent_turn(j).inverse() * joint.offset },
+            end_site: joint.end_site.map(|e| turns[j].inverse() * e),
             ..joint.clone()
         })
         .collect();
-    let rebased = Skeleton::new(joints).expect("same tree, finite offsets");
-
+    let turned = Skeleton::new(joints).expect("same tree, finite offsets");
     let mut rotations = Vec::with_capacity(motion.frames() * n);
     let mut translations = Vec::with_capacity(motion.frames() * n);
-    let mut new_global = vec![Quat::IDENTITY; n];
     for f in 0..motion.frames() {
-        for j in 0..n {
-            // r̄_global = r_global * r_global(base)^-1; r̄_local = r̄_global(parent)^-1 * r̄_global.
-            new_global[j] = globals[f * n + j].rotation * base[j].rotation.inverse();
-            let parent = skeleton.joint(j).parent;
-            let local = parent.map_or(new_global[j], |p| new_global[p].inverse() * new_global[j]);
+        for (j, turn) in turns.iter().enumerate() {
+            let local = parent_turn(j).inverse() * motion.rotations(f)[j] * *turn;
             rotations.push(local.normalize());
             let t = motion.translations(f)[j];
-            translations.push(if j == 0 { t } else { parent_base(j) * t });
+            translations.push(if j == 0 { t } else { parent_turn(j).inverse() * t });
         }
     }
-    Motion::new(rebased, motion.frame_time(), rotations, translations).expect("shapes match")
+    Motion::new(turned, motion.frame_time(), rotations, translations).expect("shapes match")
 }
 
 /// Mirrors a motion across the X = 0 plane and swaps left and right joints (found by their

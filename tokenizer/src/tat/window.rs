@@ -106,6 +106,9 @@ pub struct Reconstructed {
     /// The reconstruction with the root integrated from the decoded rates alone, as generated
     /// tokens (which carry no anchors) decode.
     pub free: Motion,
+    /// The reconstruction with the truth's root (its path, heading and orientation) in place of
+    /// the decoded one: what is left is the error of the other joints.
+    pub true_root: Motion,
 }
 
 /// A clip through a codec: canonicalised, windowed, encoded, quantised, decoded and blended.
@@ -134,7 +137,15 @@ pub fn reconstruct(
     let free = from_features(&decoded, start, truth.skeleton(), truth.frame_time());
     anchor::pin(&mut decoded, &anchor::measure(&features, &anchor_frames(&starts, features.frames)));
     let anchored = from_features(&decoded, start, truth.skeleton(), truth.frame_time());
-    Ok(Reconstructed { truth, anchored, free })
+    let mut with_true_root = decoded;
+    with_true_root.root.copy_from_slice(&features.root);
+    let row = features.joints * ROT_DIMS;
+    for f in 0..features.frames {
+        with_true_root.rotations[f * row..f * row + ROT_DIMS]
+            .copy_from_slice(&features.rotations[f * row..f * row + ROT_DIMS]);
+    }
+    let true_root = from_features(&with_true_root, start, truth.skeleton(), truth.frame_time());
+    Ok(Reconstructed { truth, anchored, free, true_root })
 }
 
 /// A clip as tokens: per window, per token step, one code per RVQ layer.

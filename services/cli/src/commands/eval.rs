@@ -104,6 +104,10 @@ struct TokenizerArgs {
     /// Source clips per transfer direction.
     #[arg(long, default_value_t = 8)]
     transfer_clips: usize,
+    /// Skip measuring each model again on the same clips with turned joint frames (it doubles
+    /// the time).
+    #[arg(long)]
+    no_invariance: bool,
     /// Record the results in each model's card.
     #[arg(long)]
     record: bool,
@@ -127,7 +131,9 @@ fn run_tokenizer(args: TokenizerArgs, command: &str) -> Result<()> {
     eprintln!("{rejected} clips rejected by cleaning");
     let mut encoder = CachedEncoder::new(c.store.encoder()?);
     let set = checkpoints(c.dir.as_deref());
-    let report = tokenizer::evaluate_tokenizers(&set, &args.models, &clips, args.transfer_clips, &mut encoder)?;
+    let invariance = !args.no_invariance;
+    let report =
+        tokenizer::evaluate_tokenizers(&set, &args.models, &clips, args.transfer_clips, invariance, &mut encoder)?;
     println!("{}", report.markdown);
     if let Some(dir) = &record_in {
         for (name, scores) in report.reconstruction.iter().filter(|(name, _)| args.models.contains(name)) {

@@ -1,7 +1,10 @@
 //! The tokenizer evaluation of EVAL.md: reconstruction (MPJPE with and without translation,
-//! GeoDist, foot skating, ground penetration) per split and source, and zero-shot transfer (cycle
-//! consistency, foot skating and ground penetration of transfers, and NEC appendix F's
-//! correlation of pairwise motion distances before and after transfer).
+//! GeoDist, foot skating, ground penetration, how far the body turns) per split and source,
+//! beside two references that are no model (each clip held in its mean pose, and in its rig's
+//! rest pose); each model against the mean-pose reference source by source; the same clips on
+//! rigs whose joint frames are turned (the world motion unchanged), which a tokenizer should not
+//! tell apart; and zero-shot transfer (cycle consistency, foot skating and ground penetration of
+//! transfers, and NEC appendix F's correlation of pairwise motion distances before and after).
 
 use super::{Table, f};
 use crate::card::CodecCard;
@@ -12,14 +15,17 @@ use anyhow::Result;
 use anymo_motion::features::{canonicalise, foot_joints};
 use anymo_motion::kinematics::all_joint_positions;
 use anymo_motion::metrics::{
-    JointKind, foot_skating, geodesic_distance_deg, geodesic_sums_by_kind, ground_penetration, mpjpe,
+    JointKind, body_turn_deg, foot_skating, geodesic_distance_deg, geodesic_sums_by_kind, ground_penetration, mpjpe,
     mpjpe_root_aligned, mpjpe_yaw_aligned,
 };
 use anymo_motion::motion::Motion;
+use anymo_motion::prep::augment::turn_joint_frames;
 use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
 use anymo_tokenizer::tat::{Codec, Tat};
 use anymo_tokenizer::text::CachedEncoder;
+use glam::Quat;
+use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -48,7 +54,18 @@ pub struct Sums {
     /// Summed angle and joint-frame count per [`JointKind`] (root, inner, unseen), anchored.
     #[serde(default)]
     geodist_kinds: [(f64, usize); 3],
+    #[serde(default)]
+    mpjpe_true_root: f64,
+    #[serde(default)]
+    body_turn: f64,
+    /// Clips whose body is turned by more than [`TURNED_DEGREES`] on average.
+    #[serde(default)]
+    turned: usize,
 }
+
+/// A reconstruction whose body is turned by more than this (mean over its frames, degrees) is
+/// counted as a turned or reversed body: a failure, whatever its MPJPE.
+pub const TURNED_DEGREES: f64 = 45.0;
 
 /// The mean metrics of a set of clips.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -92,11 +109,22 @@ pub struct Scores {
     /// descendants), degrees: what no position loss or MPJPE sees.
     #[serde(default)]
     pub geodist_unseen: f64,
+    /// Root-aligned MPJPE with the truth's root in place of the decoded one: the other joints'
+    /// error alone.
+    #[serde(default)]
+    pub mpjpe_true_root: f64,
+    /// How far the decoded body is turned against the truth, degrees (see
+    /// [`anymo_motion::metrics::body_turn_deg`]), frame-weighted.
+    #[serde(default)]
+    pub body_turn: f64,
+    /// Clips whose body is turned by more than [`TURNED_DEGREES`].
+    #[serde(default)]
+    pub turned_clips: usize,
 }
 
 impl Sums {
-    /// Adds one clip's truth and reconstruction, with the root anchored and free.
-    pub fn add(&mut self, truth: &Motion, rebuilt: &Motion, free: &Motion) {
+    /// Adds one clip's truth and reconstruction, with the root anchored, free, and the truth's.
+    pub fn add(&mut self, truth: &Motion, rebuilt: &Motion, free: &Motion, true_root: &Motion) {
         let n = truth.skeleton().len();
         let frames = truth.frames();
         let (pt, pr) = (all_joint_positions(truth), all_joint_positions(rebuilt));
@@ -108,6 +136,10 @@ impl Sums {
         self.mpjpe += w * mpjpe_root_aligned(&pr, &pt, n) as f64;
         self.mpjpe_trans += w * mpjpe(&pr, &pt) as f64;
         self.mpjpe_yaw += w * mpjpe_yaw_aligned(&pr, &pt, n) as f64;
+        self.mpjpe_true_root += w * mpjpe_root_aligned(&all_joint_positions(true_root), &pt, n) as f64;
+        let turn = body_turn_deg(&pr, &pt, n) as f64;
+        self.body_turn += w * turn;
+        self.turned += usize::from(turn > TURNED_DEGREES);
         self.mpjpe_free += w * mpjpe_root_aligned(&all_joint_positions(free), &pt, n) as f64;
         self.geodist_free += w * geodesic_distance_deg(free.all_rotations(), truth.all_rotations()) as f64;
         self.fs += w * foot_skating(&pr, n, &feet, fps, CONTACT_HEIGHT) as f64;
@@ -136,6 +168,9 @@ impl Sums {
         self.fs_truth += o.fs_truth;
         self.gp_truth += o.gp_truth;
         add_kinds(&mut self.geodist_kinds, o.geodist_kinds);
+        self.mpjpe_true_root += o.mpjpe_true_root;
+        self.body_turn += o.body_turn;
+        self.turned += o.turned;
     }
 
     /// The means.
@@ -157,6 +192,9 @@ impl Sums {
             geodist_root: kind_mean(self.geodist_kinds[JointKind::Root as usize]),
             geodist_inner: kind_mean(self.geodist_kinds[JointKind::Inner as usize]),
             geodist_unseen: kind_mean(self.geodist_kinds[JointKind::Unseen as usize]),
+            mpjpe_true_root: self.mpjpe_true_root / w,
+            body_turn: self.body_turn / w,
+            turned_clips: self.turned,
         }
     }
 }
@@ -182,6 +220,17 @@ pub struct Reconstruction {
     pub refused: usize,
 }
 
+impl Reconstruction {
+    /// The sums merged over each split's sources.
+    pub fn by_split(&self) -> BTreeMap<String, Sums> {
+        let mut out: BTreeMap<String, Sums> = BTreeMap::new();
+        for ((split, _), sums) in &self.groups {
+            out.entry(split.clone()).or_default().merge(sums);
+        }
+        out
+    }
+}
+
 /// Runs every clip through the codec.
 pub fn reconstruction(
     codec: &mut dyn Codec,
@@ -198,6 +247,7 @@ pub fn reconstruction(
                 &r.truth,
                 &r.anchored,
                 &r.free,
+                &r.true_root,
             ),
             Err(_) => out.refused += 1,
         }
@@ -237,9 +287,57 @@ pub fn static_reference(clips: &[&ModelClip]) -> Reconstruction {
         out.groups
             .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
             .or_default()
-            .add(&truth, &still, &still);
+            .add(&truth, &still, &still, &still);
     }
     out
+}
+
+/// A clip held in its rig's rest pose: every joint but the root at the identity local rotation,
+/// the root exactly as in the clip. What a tokenizer that kept only the root would give, on a rig
+/// whose rest pose is a real pose; on a rig whose rest pose lies on its side, far worse.
+pub fn rest_hold(motion: &Motion) -> Motion {
+    let n = motion.skeleton().len();
+    let rotations =
+        motion.all_rotations().iter().enumerate().map(|(k, q)| if k % n == 0 { *q } else { Quat::IDENTITY }).collect();
+    Motion::new(motion.skeleton().clone(), motion.frame_time(), rotations, motion.all_translations().to_vec())
+        .expect("the clip's own shapes")
+}
+
+/// The [`rest_hold`] reference over the clips, grouped like [`reconstruction`].
+pub fn rest_reference(clips: &[&ModelClip]) -> Reconstruction {
+    let mut out = Reconstruction::default();
+    for clip in clips {
+        let truth = canonicalise(&clip.motion);
+        let held = rest_hold(&truth);
+        out.groups
+            .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
+            .or_default()
+            .add(&truth, &held, &held, &held);
+    }
+    out
+}
+
+/// The clips re-expressed on rigs whose every joint frame is turned by a random rotation
+/// (seeded by the clip's place in `clips`, uniform over rotations): the same world motion on rigs
+/// of other local-axis conventions and other rest poses.
+pub fn with_turned_frames(clips: &[&ModelClip]) -> Vec<ModelClip> {
+    clips
+        .iter()
+        .enumerate()
+        .map(|(k, clip)| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(k as u64);
+            let turns: Vec<Quat> = (0..clip.motion.skeleton().len()).map(|_| uniform_rotation(&mut rng)).collect();
+            ModelClip { item: clip.item.clone(), split: clip.split, motion: turn_joint_frames(&clip.motion, &turns) }
+        })
+        .collect()
+}
+
+/// A rotation drawn uniformly (Shoemake's method).
+fn uniform_rotation(rng: &mut impl Rng) -> Quat {
+    let (u1, u2, u3): (f32, f32, f32) = (rng.random(), rng.random(), rng.random());
+    let tau = std::f32::consts::TAU;
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    Quat::from_xyzw(a * (tau * u2).sin(), a * (tau * u2).cos(), b * (tau * u3).sin(), b * (tau * u3).cos())
 }
 
 /// One transfer direction: clips of one kind onto one target skeleton.
@@ -334,6 +432,8 @@ pub fn transfer(
 
 /// The reference row's name: each clip held in its mean pose (see [`static_pose`]).
 pub const STATIC_REFERENCE: &str = "static pose (reference)";
+/// The other reference row's name: each clip held in its rig's rest pose (see [`rest_hold`]).
+pub const REST_REFERENCE: &str = "rest pose (reference)";
 
 /// The baseline's windows when measured (its card has none: NEC Table 1's protocol).
 const BASELINE_WINDOW: usize = 64;
@@ -365,18 +465,23 @@ impl TokenizerReport {
 }
 
 /// Reconstruction of the test and zero-shot clips of `clips` by each named codec of `set`,
-/// beside the static reference, and, when `tat` is among them, its transfers
-/// (`transfer_clips` source clips per direction).
+/// beside the two references; with `invariance`, each codec again on the same clips with turned
+/// joint frames; and, when `tat` is among them, its transfers (`transfer_clips` source clips per
+/// direction).
 pub fn evaluate_tokenizers(
     set: &Checkpoints,
     names: &[String],
     clips: &[ModelClip],
     transfer_clips: usize,
+    invariance: bool,
     encoder: &mut CachedEncoder,
 ) -> Result<TokenizerReport> {
     let eval_clips: Vec<&ModelClip> = clips.iter().filter(|c| c.split != Split::Train).collect();
     eprintln!("{} test and zero-shot clips", eval_clips.len());
-    let mut tables = Tables::default();
+    let reference = static_reference(&eval_clips);
+    let mut tables = Tables::new(&reference);
+    let turned_clips = if invariance { with_turned_frames(&eval_clips) } else { Vec::new() };
+    let turned_refs: Vec<&ModelClip> = turned_clips.iter().collect();
     let mut reconstruction = Vec::new();
     for name in names {
         let (mut codec, card) = codecs::load(&set.get(name), encoder)?;
@@ -385,13 +490,19 @@ pub fn evaluate_tokenizers(
             CodecCard::Baseline(_) => (BASELINE_WINDOW, BASELINE_OVERLAP),
         };
         let mut graphs = Graphs::new(encoder);
-        let rec = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, window, overlap)?;
-        reconstruction.push((name.clone(), tables.add(name, &rec)?));
+        let own = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, window, overlap)?;
+        reconstruction.push((name.clone(), tables.add(name, &own)?));
+        if invariance {
+            let turned = self::reconstruction(codec.as_mut(), &mut graphs, &turned_refs, window, overlap)?;
+            let label = format!("{name} (turned frames)");
+            reconstruction.push((label.clone(), tables.add(&label, &turned)?));
+            tables.compare_rigs(name, &own, &turned);
+        }
     }
-    let reference = static_reference(&eval_clips);
     reconstruction.push((STATIC_REFERENCE.to_string(), tables.add(STATIC_REFERENCE, &reference)?));
-    let Tables { table, per_source, by_kind } = tables;
-    let mut markdown = format!("{}\n{}\n{}", table.into_text(), per_source.into_text(), by_kind.into_text());
+    let rest = rest_reference(&eval_clips);
+    reconstruction.push((REST_REFERENCE.to_string(), tables.add(REST_REFERENCE, &rest)?));
+    let mut markdown = tables.into_text();
     let transfer = if names.iter().any(|m| m == "tat") {
         let transfers = transfers(set, clips, transfer_clips, encoder)?;
         markdown.push_str(&format!("\n{}", transfer_table(&transfers)));
@@ -434,6 +545,10 @@ struct Tables {
     table: Table,
     per_source: Table,
     by_kind: Table,
+    against_static: Table,
+    invariance: Table,
+    /// The static reference's scores per split and source, which every model is held against.
+    reference: BTreeMap<(String, String), Scores>,
 }
 
 /// The columns every reconstruction row has, after its model and split (and source).
@@ -447,8 +562,9 @@ const SCORES: [&str; 7] = [
     "GeoDist (free root)",
 ];
 
-impl Default for Tables {
-    fn default() -> Self {
+impl Tables {
+    /// Empty tables, holding models against `reference` source by source.
+    fn new(reference: &Reconstruction) -> Tables {
         let columns = |first: &[&'static str], last: &[&'static str]| -> Vec<&'static str> {
             first.iter().chain(&SCORES).chain(last).copied().collect()
         };
@@ -463,6 +579,86 @@ impl Default for Tables {
                 "joints that move joints",
                 "joints that move none",
             ]),
+            against_static: Table::new(&[
+                "model",
+                "split",
+                "sources",
+                "sources below the static pose",
+                "MPJPE (mean over sources)",
+                "static pose (mean over sources)",
+                "ratio (mean over sources)",
+                "worst ratio",
+                "MPJPE (true root)",
+                "body turn (deg)",
+                "turned bodies",
+            ]),
+            invariance: Table::new(&[
+                "model",
+                "split",
+                "MPJPE (own rigs)",
+                "MPJPE (turned frames)",
+                "ratio",
+                "GeoDist (own rigs)",
+                "GeoDist (turned frames)",
+                "turned bodies (own / turned frames)",
+            ]),
+            reference: reference.groups.iter().map(|(k, sums)| (k.clone(), sums.scores())).collect(),
+        }
+    }
+
+    /// Every table, as Markdown.
+    fn into_text(self) -> String {
+        [self.table, self.per_source, self.by_kind, self.against_static, self.invariance]
+            .map(Table::into_text)
+            .join("\n")
+    }
+
+    /// A row per split holding `model` on its own rigs against the same clips with turned frames.
+    fn compare_rigs(&mut self, model: &str, own: &Reconstruction, turned: &Reconstruction) {
+        let (own, turned) = (own.by_split(), turned.by_split());
+        for (split, o) in &own {
+            let Some(t) = turned.get(split) else { continue };
+            let (o, t) = (o.scores(), t.scores());
+            self.invariance.row(&[
+                model.to_string(),
+                split.clone(),
+                f(o.mpjpe),
+                f(t.mpjpe),
+                format!("{:.2}", t.mpjpe / o.mpjpe.max(1e-12)),
+                format!("{:.2}", o.geodist),
+                format!("{:.2}", t.geodist),
+                format!("{} / {}", o.turned_clips, t.turned_clips),
+            ]);
+        }
+    }
+
+    /// A row per split: the model's MPJPE against the static reference's on each source.
+    fn add_against_static(&mut self, name: &str, rec: &Reconstruction) {
+        let mut by_split: BTreeMap<&str, Vec<(&str, f64, f64)>> = BTreeMap::new();
+        for ((split, source), sums) in &rec.groups {
+            if let Some(reference) = self.reference.get(&(split.clone(), source.clone())) {
+                by_split.entry(split).or_default().push((source, sums.scores().mpjpe, reference.mpjpe));
+            }
+        }
+        let split_scores = rec.by_split();
+        for (split, sources) in by_split {
+            let n = sources.len() as f64;
+            let ratio = |(_, model, reference): &(&str, f64, f64)| model / reference.max(1e-12);
+            let worst = sources.iter().max_by(|a, b| ratio(a).total_cmp(&ratio(b))).expect("a source");
+            let s = split_scores[split].scores();
+            self.against_static.row(&[
+                name.to_string(),
+                split.to_string(),
+                sources.len().to_string(),
+                sources.iter().filter(|x| ratio(x) < 1.0).count().to_string(),
+                f(sources.iter().map(|x| x.1).sum::<f64>() / n),
+                f(sources.iter().map(|x| x.2).sum::<f64>() / n),
+                format!("{:.2}", sources.iter().map(ratio).sum::<f64>() / n),
+                format!("{:.2} ({})", ratio(worst), worst.0),
+                f(s.mpjpe_true_root),
+                format!("{:.1}", s.body_turn),
+                s.turned_clips.to_string(),
+            ]);
         }
     }
 }
@@ -483,10 +679,12 @@ fn score_cells(s: &Scores) -> Vec<String> {
 impl Tables {
     /// Adds one model's rows; returns its scores per split and per source, as JSON.
     fn add(&mut self, name: &str, rec: &Reconstruction) -> Result<serde_json::Map<String, serde_json::Value>> {
-        let mut by_split: BTreeMap<String, Sums> = BTreeMap::new();
+        let by_split = rec.by_split();
         let mut model_json = serde_json::Map::new();
+        if name != STATIC_REFERENCE {
+            self.add_against_static(name, rec);
+        }
         for ((split, source), sums) in &rec.groups {
-            by_split.entry(split.clone()).or_default().merge(sums);
             let s = sums.scores();
             self.per_source.row(&[&[name.to_string(), split.clone(), source.clone()][..], &score_cells(&s)].concat());
             model_json.insert(format!("{split}/{source}"), serde_json::to_value(s)?);
