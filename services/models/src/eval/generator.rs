@@ -72,7 +72,7 @@ fn foot_figures(motion: &Motion) -> (f32, f32) {
 
 /// A generator under evaluation: its name, the model, and the tokenizer it was trained on, which
 /// decodes its codes (the evaluator's tokenizer then encodes the motion, as it does real clips).
-pub struct Candidate<'a> {
+struct Candidate<'a> {
     /// The checkpoint name, for the table.
     pub name: String,
     /// The model.
@@ -83,7 +83,7 @@ pub struct Candidate<'a> {
 
 /// Scores the real test motions and each generator's motions for the same captions; `tat` is
 /// the tokenizer the evaluator reads.
-pub fn evaluate(
+fn evaluate(
     tat: &mut Tat,
     evaluator: &Evaluator,
     generators: &[Candidate],

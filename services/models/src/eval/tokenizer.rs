@@ -278,16 +278,17 @@ pub fn static_pose(motion: &Motion) -> Motion {
         .expect("the clip's own shapes")
 }
 
-/// The [`static_pose`] reference over the clips, grouped like [`reconstruction`].
-pub fn static_reference(clips: &[&ModelClip]) -> Reconstruction {
+/// A reference that is no model: each clip replaced by `hold` of itself (such as
+/// [`static_pose`] or [`rest_hold`]), grouped like [`reconstruction`].
+pub fn held_reference(clips: &[&ModelClip], hold: fn(&Motion) -> Motion) -> Reconstruction {
     let mut out = Reconstruction::default();
     for clip in clips {
         let truth = canonicalise(&clip.motion);
-        let still = static_pose(&truth);
+        let held = hold(&truth);
         out.groups
             .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
             .or_default()
-            .add(&truth, &still, &still, &still);
+            .add(&truth, &held, &held, &held);
     }
     out
 }
@@ -301,20 +302,6 @@ pub fn rest_hold(motion: &Motion) -> Motion {
         motion.all_rotations().iter().enumerate().map(|(k, q)| if k % n == 0 { *q } else { Quat::IDENTITY }).collect();
     Motion::new(motion.skeleton().clone(), motion.frame_time(), rotations, motion.all_translations().to_vec())
         .expect("the clip's own shapes")
-}
-
-/// The [`rest_hold`] reference over the clips, grouped like [`reconstruction`].
-pub fn rest_reference(clips: &[&ModelClip]) -> Reconstruction {
-    let mut out = Reconstruction::default();
-    for clip in clips {
-        let truth = canonicalise(&clip.motion);
-        let held = rest_hold(&truth);
-        out.groups
-            .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
-            .or_default()
-            .add(&truth, &held, &held, &held);
-    }
-    out
 }
 
 /// The clips re-expressed on rigs whose every joint frame is turned by a random rotation
@@ -478,7 +465,7 @@ pub fn evaluate_tokenizers(
 ) -> Result<TokenizerReport> {
     let eval_clips: Vec<&ModelClip> = clips.iter().filter(|c| c.split != Split::Train).collect();
     eprintln!("{} test and zero-shot clips", eval_clips.len());
-    let reference = static_reference(&eval_clips);
+    let reference = held_reference(&eval_clips, static_pose);
     let mut tables = Tables::new(&reference);
     let turned_clips = if invariance { with_turned_frames(&eval_clips) } else { Vec::new() };
     let turned_refs: Vec<&ModelClip> = turned_clips.iter().collect();
@@ -500,7 +487,7 @@ pub fn evaluate_tokenizers(
         }
     }
     reconstruction.push((STATIC_REFERENCE.to_string(), tables.add(STATIC_REFERENCE, &reference)?));
-    let rest = rest_reference(&eval_clips);
+    let rest = held_reference(&eval_clips, rest_hold);
     reconstruction.push((REST_REFERENCE.to_string(), tables.add(REST_REFERENCE, &rest)?));
     let mut markdown = tables.into_text();
     let transfer = if names.iter().any(|m| m == "tat") {
