@@ -14,6 +14,9 @@ use anymo_tokenizer::tat::{Tat, anchor};
 use anymo_tokenizer::text::CachedEncoder;
 use serde::{Deserialize, Serialize};
 
+/// The highest frame rate decoded motion is written at.
+pub const MAX_FPS: f64 = 1000.0;
+
 type Result<T, E = ModelError> = std::result::Result<T, E>;
 
 /// The tokens file: the tokens and the checkpoint that made them.
@@ -51,16 +54,21 @@ impl TokenCodec {
         Ok(TokenFile { model: self.name.clone(), model_steps: self.steps, tokens })
     }
 
-    /// Tokens as motion on `skeleton` (in its units, with its hierarchy and channels), refused
-    /// when they do not fit this checkpoint or do not describe a clip.
-    pub fn detokenize(&mut self, tokens: &Tokens, skeleton: &Skeleton) -> Result<Motion> {
+    /// Tokens as motion on `skeleton` (in its units, with its hierarchy and channels) at `fps`
+    /// frames per second, refused when they do not fit this checkpoint or do not describe a clip.
+    pub fn detokenize(&mut self, tokens: &Tokens, skeleton: &Skeleton, fps: f64) -> Result<Motion> {
         self.check(tokens).map_err(ModelError::Refused)?;
+        if !(fps > 0.0 && fps <= MAX_FPS) {
+            return Err(ModelError::refused(format!("the frame rate must be in (0, {MAX_FPS}]; {fps} was asked")));
+        }
         let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
         let cleaned = clean(&rest, &CleanOptions::default())
             .map_err(|r| ModelError::refused(format!("the skeleton cannot be used as a target: {r}")))?;
         let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
         let decoded = detokenize(&self.tat, tokens, &graph, cleaned.motion.skeleton())?;
-        Ok(cleaned.restore(&decoded, &rest))
+        let restored = cleaned.restore(&decoded, &rest);
+        // The models run at MODEL_FPS; the answer comes at the rate asked for.
+        Ok(if (restored.fps() - fps).abs() > 1e-9 { restored.resample(fps) } else { restored })
     }
 
     /// Why tokens (perhaps from a client) cannot be decoded by this checkpoint, if they cannot:
@@ -102,9 +110,9 @@ impl TokenCodec {
         anchor::check(&tokens.anchors, tokens.frames)
     }
 
-    /// A clip moved onto `skeleton` through tokens.
-    pub fn transfer(&mut self, motion: &Motion, skeleton: &Skeleton) -> Result<Motion> {
+    /// A clip moved onto `skeleton` through tokens, at `fps` frames per second.
+    pub fn transfer(&mut self, motion: &Motion, skeleton: &Skeleton, fps: f64) -> Result<Motion> {
         let file = self.tokenize(motion)?;
-        self.detokenize(&file.tokens, skeleton)
+        self.detokenize(&file.tokens, skeleton, fps)
     }
 }

@@ -57,17 +57,23 @@ pub fn parse_bvh(state: &AppState, what: &str, bytes: &[u8], require_motion: boo
 impl AppState {
     /// The skeleton a request names.
     pub async fn skeleton(&self, source: &SkeletonSource) -> Result<Skeleton, ApiError> {
-        match source {
-            SkeletonSource::Bvh(bytes) => Ok(parse_bvh(self, "the skeleton", bytes, false)?.skeleton().clone()),
+        Ok(self.target(source).await?.0)
+    }
+
+    /// The skeleton a request names and the frame rate motion decoded onto it takes: an
+    /// uploaded file's own, 30 for a stored skeleton (the rate the store keeps skeletons at).
+    pub async fn target(&self, source: &SkeletonSource) -> Result<(Skeleton, f64), ApiError> {
+        let file = match source {
+            SkeletonSource::Bvh(bytes) => parse_bvh(self, "the skeleton", bytes, false)?,
             SkeletonSource::Stored(id) => {
                 let row = self.store.skeleton(*id).await?.ok_or_else(|| {
                     ApiError::not_found(format!("no skeleton {id} in the store (GET /v1/skeletons lists them)"))
                 })?;
-                let clip = bvh::read(row.hierarchy.as_bytes(), ReadOptions::default())
-                    .map_err(|e| ApiError::internal(format!("stored skeleton {id} does not parse: {e}")))?;
-                Ok(clip.skeleton().clone())
+                bvh::read(row.hierarchy.as_bytes(), ReadOptions::default())
+                    .map_err(|e| ApiError::internal(format!("stored skeleton {id} does not parse: {e}")))?
             }
-        }
+        };
+        Ok((file.skeleton().clone(), file.fps()))
     }
 
     /// The clip a request names, as motion.

@@ -1,5 +1,6 @@
 //! `anymo tokenize`, `anymo detokenize` and `anymo transfer`: motion to TAT tokens and back, on
-//! the source skeleton or any other, with the shipped checkpoints.
+//! the source skeleton or any other, with the shipped checkpoints, at the target file's frame
+//! rate unless `--fps` says otherwise.
 
 use super::context::{CheckpointArgs, StoreArgs};
 use super::input;
@@ -48,6 +49,9 @@ pub struct DetokenizeArgs {
     /// The BVH to write.
     #[arg(short, long)]
     output: PathBuf,
+    /// Frames per second of the output [default: the skeleton file's]
+    #[arg(long)]
+    fps: Option<f64>,
     #[command(flatten)]
     model: ModelArgs,
 }
@@ -65,6 +69,9 @@ pub struct TransferArgs {
     /// The BVH to write.
     #[arg(short, long)]
     output: PathBuf,
+    /// Frames per second of the output [default: the target file's]
+    #[arg(long)]
+    fps: Option<f64>,
     #[command(flatten)]
     model: ModelArgs,
 }
@@ -75,9 +82,14 @@ fn load(args: &ModelArgs) -> Result<TokenCodec> {
 
 /// The skeleton of a BVH file (its motion, if any, is not needed).
 pub(super) fn read_skeleton(path: &Path) -> Result<Skeleton> {
+    Ok(read_target(path)?.0)
+}
+
+/// The skeleton of a BVH file and the file's frame rate, which motion decoded onto it takes.
+fn read_target(path: &Path) -> Result<(Skeleton, f64)> {
     let clip =
         bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
-    Ok(clip.skeleton().clone())
+    Ok((clip.skeleton().clone(), 1.0 / clip.frame_time()))
 }
 
 pub(super) fn write_bvh(motion: &Motion, path: &Path) -> Result<()> {
@@ -103,13 +115,15 @@ pub fn run_detokenize(args: DetokenizeArgs) -> Result<()> {
     let file: TokenFile = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a tokens file from `anymo tokenize`", args.tokens.display()))?;
     let mut codec = load(&args.model)?;
-    let motion = codec.detokenize(&file.tokens, &read_skeleton(&args.skeleton)?)?;
+    let (skeleton, file_fps) = read_target(&args.skeleton)?;
+    let motion = codec.detokenize(&file.tokens, &skeleton, args.fps.unwrap_or(file_fps))?;
     write_bvh(&motion, &args.output)
 }
 
 pub fn run_transfer(args: TransferArgs) -> Result<()> {
     let mut codec = load(&args.model)?;
     let motion = input::read_motion(&args.input, args.animation.as_deref())?;
-    let moved = codec.transfer(&motion, &read_skeleton(&args.to)?)?;
+    let (skeleton, file_fps) = read_target(&args.to)?;
+    let moved = codec.transfer(&motion, &skeleton, args.fps.unwrap_or(file_fps))?;
     write_bvh(&moved, &args.output)
 }
