@@ -8,6 +8,7 @@ use anymo_motion::motion::Motion;
 use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones, turn_joint_frames};
 use anymo_motion::prep::clean::{CleanOptions, Rejection, clean};
 use anymo_motion::prep::labels::{label_skeleton, mirror_pairs};
+use anymo_motion::reference::ReferencePose;
 use anymo_tests::{data_dir, files_with_suffix};
 use glam::{Quat, Vec3};
 use std::collections::BTreeMap;
@@ -222,4 +223,62 @@ fn a_walk_has_feet_that_touch_down_and_lift() {
             (1..frames - 1).filter(|&f| at(f).y <= 0.03 && (at(f + 1) - at(f - 1)).length() / 2.0 <= 0.005).count();
         assert!(down > frames / 10 && down < frames * 9 / 10, "{name}: in contact {down} of {frames} frames");
     }
+}
+
+/// Mean angle (degrees) of the non-root joints' local rotations from the identity.
+fn mean_local_angle(motion: &Motion) -> f32 {
+    let n = motion.skeleton().len();
+    let angles: Vec<f32> = motion
+        .all_rotations()
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| k % n != 0)
+        .map(|(_, q)| q.angle_between(Quat::IDENTITY))
+        .collect();
+    angles.iter().sum::<f32>() / angles.len().max(1) as f32 * 180.0 / std::f32::consts::PI
+}
+
+#[test]
+fn rebasing_on_the_mean_pose_leaves_small_deltas_that_no_rig_convention_changes() {
+    let Some(files) = corpus_sample(29) else { return };
+    let mut tested = 0;
+    for (k, path) in files.iter().enumerate() {
+        let Ok(cleaned) = clean(&load(path), &CleanOptions::default()) else { continue };
+        let motion = cleaned.motion;
+        let n = motion.skeleton().len();
+        let reference = ReferencePose::mean_of([&motion]).unwrap();
+        let rebased = reference.rebase(&motion);
+        let (raw, delta) = (mean_local_angle(&motion), mean_local_angle(&rebased));
+        eprintln!("{}: local rotations {raw:.1} deg from rest, {delta:.1} deg from the mean pose", path.display());
+        assert!(delta < 30.0, "{}: {delta} deg from the clip's own mean pose", path.display());
+
+        // The same world motion on a rig with other local axes rebases to the same features.
+        let turns: Vec<Quat> = (0..n)
+            .map(|j| {
+                let a = (j * 5 + k * 11) as f32;
+                Quat::from_axis_angle(Vec3::new(a.cos(), 0.2 + a.sin(), (a * 0.3).sin()).normalize(), 0.3 + a % 2.9)
+            })
+            .collect();
+        let turned = turn_joint_frames(&motion, &turns);
+        let again = ReferencePose::mean_of([&turned]).unwrap().rebase(&turned);
+        let ((a, _), (b, _)) = (to_features(&rebased), to_features(&again));
+        let worst = a
+            .rotations
+            .iter()
+            .chain(&a.root)
+            .zip(b.rotations.iter().chain(&b.root))
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 5e-3, "{}: features differ by {worst} on a rig with turned joint frames", path.display());
+        let offsets = rebased
+            .skeleton()
+            .joints()
+            .iter()
+            .zip(again.skeleton().joints())
+            .map(|(p, q)| p.offset.distance(q.offset))
+            .fold(0.0f32, f32::max);
+        assert!(offsets < 1e-4, "{}: rebased offsets differ by {offsets}", path.display());
+        tested += 1;
+    }
+    assert!(tested >= 30, "only {tested} clips could be cleaned");
 }

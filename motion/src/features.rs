@@ -8,7 +8,8 @@
 
 use crate::kinematics::{all_global_transforms, all_joint_positions};
 use crate::motion::Motion;
-use crate::prep::labels::{Side, label_skeleton};
+use crate::prep::labels::label_skeleton;
+use crate::reference::side_facing;
 use crate::rotation::{quat_to_rot6d, rot6d_to_quat, twist_about};
 use crate::skeleton::Skeleton;
 use glam::{Quat, Vec3};
@@ -182,18 +183,8 @@ pub fn canonicalise(motion: &Motion) -> Motion {
 
 /// The angle about +Y from +Z to the direction the subject faces in the first frame.
 fn facing_angle(motion: &Motion, first: &[Vec3]) -> f32 {
-    let labels = label_skeleton(motion.skeleton());
-    let mean = |side: Side| {
-        let pts: Vec<Vec3> = labels.iter().zip(first).filter(|(l, _)| l.side == Some(side)).map(|(_, p)| *p).collect();
-        (!pts.is_empty()).then(|| pts.iter().sum::<Vec3>() / pts.len() as f32)
-    };
-    if let (Some(left), Some(right)) = (mean(Side::Left), mean(Side::Right)) {
-        let forward = (left - right).cross(Vec3::Y);
-        if forward.x.hypot(forward.z) > 1e-6 {
-            return forward.x.atan2(forward.z);
-        }
-    }
-    heading_of(motion.rotations(0)[0])
+    let sides: Vec<_> = label_skeleton(motion.skeleton()).iter().map(|l| l.side).collect();
+    side_facing(&sides, first).unwrap_or_else(|| heading_of(motion.rotations(0)[0]))
 }
 
 #[cfg(test)]

@@ -24,5 +24,6 @@ pub mod kinematics;
 pub mod metrics;
 pub mod motion;
 pub mod prep;
+pub mod reference;
 pub mod rotation;
 pub mod skeleton;

@@ -112,20 +112,6 @@ impl Checkpoints {
     pub fn get(&self, name: &str) -> Checkpoint {
         Checkpoint { set: self.clone(), name: name.to_string() }
     }
-
-    /// The names of the checkpoints in this set, sorted.
-    pub fn names(&self) -> Result<Vec<String>, CheckpointError> {
-        let mut names: Vec<String> = match self {
-            Checkpoints::BuiltIn(all) => all.iter().map(|c| c.name.to_string()).collect(),
-            Checkpoints::Dir(dir) => std::fs::read_dir(dir)
-                .map_err(|error| CheckpointError::Io { path: dir.display().to_string(), error })?
-                .filter_map(|e| e.ok()?.file_name().to_str()?.strip_suffix(".safetensors").map(str::to_string))
-                .filter(|name| dir.join(format!("{name}.json")).is_file())
-                .collect(),
-        };
-        names.sort();
-        Ok(names)
-    }
 }
 
 /// One named checkpoint: safetensors weights and the model card beside them.
@@ -222,16 +208,11 @@ impl Checkpoint {
         }
     }
 
-    /// The weights as named tensors.
-    pub fn tensors(&self) -> Result<HashMap<String, Tensor>, CheckpointError> {
-        let bytes = self.weights()?;
-        candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)
-            .map_err(|error| CheckpointError::Weights { name: self.name.clone(), error })
-    }
-
     /// Loads the weights into `params` and returns the tensors that are not parameters (buffers).
     pub fn load_into(&self, params: &mut Params) -> Result<HashMap<String, Tensor>, CheckpointError> {
-        params.assign(self.tensors()?).map_err(|error| CheckpointError::Weights { name: self.name.clone(), error })
+        let weights = |error| CheckpointError::Weights { name: self.name.clone(), error };
+        let tensors = candle_core::safetensors::load_buffer(&self.weights()?, &Device::Cpu).map_err(weights)?;
+        params.assign(tensors).map_err(weights)
     }
 
     /// The blake3 of the weights (hex), which a generator's or evaluator's card records for the
