@@ -2,7 +2,8 @@
 //!
 //! Everything anymo does starts here: BVH and glTF files become a [`skeleton::Skeleton`] and a
 //! [`motion::Motion`]; [`kinematics`] turns local joint transforms into global positions;
-//! [`features`] maps motion to the models' per-joint features and exactly back; [`prep`] cleans
+//! [`features`] maps motion to the models' per-joint features and exactly back; [`reference`]
+//! rebases motion onto a reference pose so no rig convention shows in it; [`prep`] cleans
 //! and normalises clips for training without touching what users get back; [`metrics`] measures
 //! reconstruction and transfer.
 //!
