@@ -188,12 +188,13 @@ fn facing_angle(motion: &Motion, first: &[Vec3]) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::bvh::parse_str;
     use crate::kinematics::all_joint_positions;
 
-    const WALK: &str = "HIERARCHY
+    /// A two-legged walk of four frames, shared with the other modules' tests.
+    pub(crate) const WALK: &str = "HIERARCHY
 ROOT Hips
 {
   OFFSET 0 0 0

@@ -132,41 +132,9 @@ fn yaw_of(direction: Vec3) -> Option<f32> {
 mod tests {
     use super::*;
     use crate::bvh::parse_str;
+    use crate::features::tests::WALK;
     use crate::features::to_features;
     use crate::kinematics::all_joint_positions;
-
-    const WALK: &str = "HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT LeftLeg
-  {
-    OFFSET 1 -1 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 -1 0
-    }
-  }
-  JOINT RightLeg
-  {
-    OFFSET -1 -1 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 -1 0
-    }
-  }
-}
-MOTION
-Frames: 4
-Frame Time: 0.1
-5 2 7 80 10 90 10 0 0 -10 0 0
-5.5 2.1 7 83 10 100 -10 0 0 10 0 0
-6 2 7.2 85 12 120 10 5 0 -10 0 0
-6.4 2 7.1 84 10 150 -10 0 3 10 0 0
-";
 
     fn walk() -> Motion {
         Motion::from_bvh(&parse_str(WALK).unwrap())
