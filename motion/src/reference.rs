@@ -61,11 +61,6 @@ impl ReferencePose {
         ReferencePose { globals: facing_poses(&one).remove(0) }
     }
 
-    /// Each joint's global rotation at the reference.
-    pub fn globals(&self) -> &[Quat] {
-        &self.globals
-    }
-
     /// The motion with every joint frame turned to be world-aligned at this reference: local
     /// rotations are deltas from it, offsets are its bone vectors. World positions are unchanged.
     ///
