@@ -5,7 +5,7 @@ use anymo_motion::bvh::{self, ReadOptions};
 use anymo_motion::features::{canonicalise, from_features, to_features};
 use anymo_motion::kinematics::all_joint_positions;
 use anymo_motion::motion::Motion;
-use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones, turn_joint_frames};
+use anymo_motion::prep::augment::{mirror, scale_bones, turn_joint_frames};
 use anymo_motion::prep::clean::{CleanOptions, Rejection, clean};
 use anymo_motion::prep::labels::{label_skeleton, mirror_pairs};
 use anymo_motion::reference::ReferencePose;
@@ -99,11 +99,11 @@ fn features_rebuild_canonical_clips() {
 }
 
 #[test]
-fn rebasing_the_rest_pose_keeps_every_position() {
+fn rebasing_on_a_frame_keeps_every_position() {
     let Some(files) = corpus_sample(29) else { return };
     for path in &files {
         let motion = load(path);
-        let rebased = rebase_rest_pose(&motion, motion.frames() / 2);
+        let rebased = ReferencePose::of_frame(&motion, motion.frames() / 2).rebase(&motion);
         assert_ne!(rebased.skeleton(), motion.skeleton());
         let worst = worst_distance(&all_joint_positions(&motion), &all_joint_positions(&rebased));
         assert!(worst < 1e-4 * motion.skeleton().diameter().max(1.0), "{}: {worst}", path.display());
@@ -184,14 +184,18 @@ fn bone_scaling_scales_the_body_not_the_path() {
 
 #[test]
 fn the_loader_batches_real_clips_into_finite_tensors() {
-    use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
+    use anymo_tokenizer::dataset::{LoaderConfig, TrainingClip, WindowLoader};
     let Some(files) = corpus_sample(97) else { return };
-    let clips: Vec<Motion> =
-        files.iter().filter_map(|p| clean(&load(p), &CleanOptions::default()).ok()).map(|c| c.motion).collect();
-    let mut loader =
-        WindowLoader::new(clips, LoaderConfig { window: 32, batch_size: 4, seed: 1, ..LoaderConfig::default() });
-    let batches = loader.epoch().unwrap();
-    assert!(batches.len() >= loader.groups());
+    let clips: Vec<TrainingClip> = files
+        .iter()
+        .filter_map(|p| {
+            let motion = clean(&load(p), &CleanOptions::default()).ok()?.motion;
+            Some(TrainingClip { motion, source: p.parent()?.display().to_string() })
+        })
+        .collect();
+    let config = LoaderConfig { window: 32, batch_size: 4, seed: 1, skeletons_per_step: 4, ..LoaderConfig::default() };
+    let loader = WindowLoader::new(clips, config);
+    let batches: Vec<_> = (0..8).flat_map(|step| loader.step(step).unwrap()).collect();
     for b in &batches {
         for t in [&b.root, &b.rotations, &b.offsets] {
             let v: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();

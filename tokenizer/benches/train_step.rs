@@ -7,11 +7,11 @@
 
 use anymo_motion::bvh::parse_str;
 use anymo_motion::motion::Motion;
-use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
+use anymo_tokenizer::dataset::{LoaderConfig, TrainingClip, WindowLoader};
 use anymo_tokenizer::nn::{AdamW, AdamWConfig, Params, flops};
 use anymo_tokenizer::owo::graph::{NODE_INPUT_DIM, SkeletonGraph};
 use anymo_tokenizer::tat::objective::{Prepared, RootStats, loss};
-use anymo_tokenizer::tat::{Codec, Fusion, Tat, TokenizerConfig};
+use anymo_tokenizer::tat::{Codec, Fusion, Representation, Tat, TokenizerConfig};
 use anymo_tokenizer::text::EMBEDDING_DIM;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
@@ -71,11 +71,11 @@ fn main() {
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "all cores".into());
     let motion = humanoid(64);
     let joints = motion.skeleton().len();
-    let clips = (0..16).map(|_| motion.clone()).collect();
-    let mut loader = WindowLoader::new(clips, LoaderConfig { window: 64, batch_size: 16, ..LoaderConfig::default() });
-    let batch = loader.epoch().unwrap().remove(0);
+    let clips = (0..16).map(|_| TrainingClip { motion: motion.clone(), source: "humanoid".into() }).collect();
+    let loader = WindowLoader::new(clips, LoaderConfig { window: 64, batch_size: 16, ..LoaderConfig::default() });
+    let batch = loader.step(0).unwrap().remove(0);
     let stats = RootStats { mean: [0.0; 4], std: [1.0; 4] };
-    let config = TokenizerConfig::new(stats, Fusion::Film);
+    let config = TokenizerConfig::new(stats, Fusion::Film, Representation::Reference);
     let mut owo_params = Params::new(0);
     let mut tat = Tat::new(config, 0, &mut owo_params, vec![0.1; EMBEDDING_DIM]).unwrap();
     let graph = SkeletonGraph {

@@ -4,14 +4,15 @@
 
 use anymo_motion::bvh::parse_str;
 use anymo_motion::motion::Motion;
-use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
-use anymo_tokenizer::nn::{AdamW, AdamWConfig, Params};
+use anymo_tokenizer::dataset::{LoaderConfig, TrainingClip, WindowLoader};
+use anymo_tokenizer::nn::{AdamW, AdamWConfig, Params, snapshot};
 use anymo_tokenizer::owo::graph::{GraphBatch, NODE_INPUT_DIM, SkeletonGraph};
 use anymo_tokenizer::owo::pretrain::{Heads, Targets, losses};
 use anymo_tokenizer::owo::{Owo, OwoConfig};
 use anymo_tokenizer::tat::objective::{LossWeights, Prepared, RootStats, loss};
 use anymo_tokenizer::tat::rvq::{Rvq, RvqConfig};
-use anymo_tokenizer::tat::{Baseline, BaselineConfig, Codec, Fusion, Tat, TatConfig, TokenizerConfig};
+use anymo_tokenizer::tat::temporal::Upsampling;
+use anymo_tokenizer::tat::{Baseline, BaselineConfig, Codec, Fusion, Representation, Tat, TatConfig, TokenizerConfig};
 use anymo_tokenizer::text::EMBEDDING_DIM;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
@@ -65,7 +66,8 @@ fn small_rvq() -> RvqConfig {
 
 fn batch() -> anymo_tokenizer::dataset::Batch {
     let config = LoaderConfig { window: 16, batch_size: 4, ..LoaderConfig::default() };
-    WindowLoader::new(vec![walker(40), walker(33)], config).epoch().unwrap().remove(0)
+    let clips = [walker(40), walker(33)].map(|motion| TrainingClip { motion, source: "walks".into() });
+    WindowLoader::new(clips.to_vec(), config).step(0).unwrap().remove(0)
 }
 
 #[test]
@@ -87,7 +89,16 @@ fn tat(fusion: Fusion) -> Tat {
     let mut owo_params = Params::new(0);
     let owo = OwoConfig { dim: 16, blocks: 2, heads: 2, freqs: 2 };
     let config = TokenizerConfig {
-        tat: TatConfig { dim: 16, heads: 2, ff: 32, blocks: 1, spatial_layers: 1, condition_dim: 16 + 6 * 2, fusion },
+        tat: TatConfig {
+            dim: 16,
+            heads: 2,
+            ff: 32,
+            blocks: 1,
+            spatial_layers: 1,
+            condition_dim: 16 + 6 * 2,
+            fusion,
+            upsampling: Upsampling::Interpolate,
+        },
         rvq: small_rvq(),
         owo,
         offset_freqs: 2,
@@ -95,6 +106,7 @@ fn tat(fusion: Fusion) -> Tat {
         overlap: 4,
         root: RootStats { mean: [0.0; 4], std: [1.0; 4] },
         weights: LossWeights::default(),
+        representation: Representation::Reference,
     };
     Tat::new(config, 3, &mut owo_params, vec![0.1; EMBEDDING_DIM]).unwrap()
 }
@@ -110,9 +122,11 @@ fn every_tat_and_baseline_variable_receives_a_gradient() {
             max_joints: 8,
             dim: 16,
             blocks: 1,
+            upsampling: Upsampling::Interpolate,
             rvq: small_rvq(),
             root: stats,
             weights: LossWeights::default(),
+            representation: Representation::Reference,
         },
         5,
     )
@@ -137,13 +151,13 @@ fn optimiser_state_round_trips_and_resumes_exactly() {
         let x = Tensor::from_vec((0..8).map(|v| v as f32 * 0.1).collect::<Vec<_>>(), (2, 4), &Device::Cpu).unwrap();
         for step in 0..steps {
             if split == Some(step) {
-                params.save(&dir.join("p.safetensors")).unwrap();
-                opt.save(&dir.join("o.safetensors")).unwrap();
+                let path = dir.join("state.safetensors");
+                snapshot::save(&path, &params, &opt, "{}").unwrap();
                 let mut fresh = Params::new(1234);
                 let _ = fresh.normal("w", &[4, 3], 1.0).unwrap();
                 let mut fresh_opt = AdamW::new(&fresh, AdamWConfig::default()).unwrap();
-                assert!(fresh.load(&dir.join("p.safetensors")).unwrap().is_empty());
-                fresh_opt.load(&dir.join("o.safetensors")).unwrap();
+                let (_, buffers) = snapshot::load(&path, &mut fresh, &mut fresh_opt).unwrap();
+                assert!(buffers.is_empty());
                 assert_eq!(fresh_opt.steps(), step as u64);
                 params = fresh;
                 opt = fresh_opt;

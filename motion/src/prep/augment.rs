@@ -1,9 +1,9 @@
-//! Augmentations that make new training clips with the same meaning: base-pose randomisation
-//! (NEC appendix C.1), left/right mirroring, and bone-length scaling. Each takes its random
+//! Augmentations that make new training clips with the same meaning: joint frames turned (the
+//! same motion on a rig of another convention, which reference-pose rebasing and NEC appendix
+//! C.1's base-pose randomisation build on), left/right mirroring, and bone-length scaling. Each takes its random
 //! choices as arguments, so the caller's seeded generator decides and results are reproducible.
 
 use super::labels::{label_skeleton, mirror_pairs};
-use crate::kinematics::all_global_transforms;
 use crate::motion::Motion;
 use crate::skeleton::{Joint, Skeleton};
 use glam::{Quat, Vec3};
@@ -19,16 +19,6 @@ pub enum MirrorError {
         /// Its partner on the other side.
         partner: String,
     },
-}
-
-/// Re-expresses a motion on a new rest pose: the pose of frame `base_frame` (NEC C.1). Joint
-/// positions in every frame are unchanged; offsets and local rotations change, which teaches a
-/// model that the same motion can be written on many rest poses.
-pub fn rebase_rest_pose(motion: &Motion, base_frame: usize) -> Motion {
-    let n = motion.skeleton().len();
-    let globals = all_global_transforms(motion);
-    let turns: Vec<Quat> = globals[base_frame * n..(base_frame + 1) * n].iter().map(|t| t.rotation.inverse()).collect();
-    turn_joint_frames(motion, &turns)
 }
 
 /// Re-expresses a motion on a rig whose joint frames are turned: joint `j`'s frame becomes

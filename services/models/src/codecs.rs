@@ -3,13 +3,14 @@
 
 use crate::card::CodecCard;
 use crate::checkpoint::Checkpoint;
+use crate::data::{ModelClip, topology};
 use anyhow::Result;
 use anymo_motion::skeleton::Skeleton;
 use anymo_tokenizer::nn::ModelCard;
 use anymo_tokenizer::owo::SkeletonGraph;
-use anymo_tokenizer::tat::{Baseline, Codec};
+use anymo_tokenizer::tat::{Baseline, Basis, Codec, Representation};
 use anymo_tokenizer::text::CachedEncoder;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// Loads a codec checkpoint (`tat`, `tat-additive`, `tat-scratch`, `baseline`, ...).
 pub fn load(checkpoint: &Checkpoint, encoder: &mut CachedEncoder) -> Result<(Box<dyn Codec>, ModelCard<CodecCard>)> {
@@ -51,4 +52,25 @@ impl<'a> Graphs<'a> {
         self.cache.insert(key, g.clone());
         Ok(g)
     }
+}
+
+/// The basis a codec of `representation` reads each skeleton of `clips` in, by topology (see
+/// [`crate::data::topology`]): for the reference representation, the mean pose of all of that
+/// skeleton's clips. Training, tokenizing a corpus for the generators and measuring on seen
+/// rigs all read a skeleton in the same basis this way.
+pub fn bases_by_topology(
+    representation: Representation,
+    clips: &[&ModelClip],
+) -> BTreeMap<Vec<(Option<usize>, String)>, Basis> {
+    let mut by_topology: BTreeMap<_, Vec<&ModelClip>> = BTreeMap::new();
+    for c in clips {
+        by_topology.entry(topology(&c.motion)).or_default().push(c);
+    }
+    by_topology
+        .into_iter()
+        .map(|(key, members)| {
+            let skeleton = members[0].motion.skeleton();
+            (key, Basis::of(representation, skeleton, members.iter().map(|c| &c.motion)))
+        })
+        .collect()
 }

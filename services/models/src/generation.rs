@@ -1,8 +1,8 @@
 //! The generator's and evaluator's data and checkpoints: clips tokenized whole by the shipped
 //! TAT with their caption and skeleton embeddings, and loading trained models by name.
 
-use super::codecs::Graphs;
-use super::data::ModelClip;
+use super::codecs::{Graphs, bases_by_topology};
+use super::data::{ModelClip, topology};
 use crate::card::{EvaluatorCard, GeneratorCard};
 use crate::checkpoint::Checkpoint;
 use anyhow::Result;
@@ -21,8 +21,10 @@ pub fn is_human(subject: &str) -> bool {
     HUMAN_SUBJECTS.contains(&subject)
 }
 
-/// Tokenizes clips whole with TAT and embeds their captions and skeletons; with `decoded`, also
-/// the latents of each clip's codes decoded and encoded again (for the evaluator).
+/// Tokenizes clips whole with TAT (each skeleton in its basis, see
+/// [`crate::codecs::bases_by_topology`]) and embeds their captions and skeletons; with
+/// `decoded`, also the latents of each clip's codes decoded and encoded again (for the
+/// evaluator).
 pub fn token_clips(
     clips: &[&ModelClip],
     tat: &mut Tat,
@@ -30,17 +32,19 @@ pub fn token_clips(
     decoded: bool,
 ) -> Result<Vec<TokenClip>> {
     let mut out = Vec::with_capacity(clips.len());
+    let bases = bases_by_topology(tat.config().representation, clips);
     for clip in clips {
+        let motion = bases[&topology(&clip.motion)].enter(&clip.motion);
         let captions =
             if clip.item.captions.is_empty() { vec![clip.item.subject.clone()] } else { clip.item.captions.clone() };
         let refs: Vec<&str> = captions.iter().map(String::as_str).collect();
         let text = encoder.encode(&refs)?;
-        let graph = Graphs::new(encoder).of(clip.motion.skeleton())?;
+        let graph = Graphs::new(encoder).of(motion.skeleton())?;
         let skeleton = tat.skeleton_embedding(&graph)?;
-        let encoded = encode_whole(tat, &graph, &clip.motion)?;
+        let encoded = encode_whole(tat, &graph, &motion)?;
         let decoded_latent = if decoded {
-            let motion = detokenize(tat, &encoded.tokens, &graph, clip.motion.skeleton())?;
-            encode_whole(tat, &graph, &motion)?.latent
+            let again = detokenize(tat, &encoded.tokens, &graph, motion.skeleton())?;
+            encode_whole(tat, &graph, &again)?.latent
         } else {
             Vec::new()
         };

@@ -6,20 +6,21 @@
 use crate::card::{BaselineCard, CodecCard, EvaluatorCard, GeneratorCard, TokenizerCard, TokenizerRef};
 use crate::checkpoint::Checkpoint;
 use crate::data::{self, ModelClip};
-use crate::{generation, train};
+use crate::{codecs, generation, train};
 use anyhow::{Context, Result, bail};
 use anymo_generator::generate::Kind;
 use anymo_generator::{Evaluator, EvaluatorConfig, Generator, GeneratorConfig, TokenClip};
 use anymo_motion::features::{canonicalise, to_features};
 use anymo_motion::skeleton::Skeleton;
-use anymo_tokenizer::dataset::Split;
+use anymo_tokenizer::dataset::{Split, TrainingClip};
 use anymo_tokenizer::nn::{DataRecord, ModelCard, Params};
 use anymo_tokenizer::owo::graph::GLOBAL_NODE_TEXT;
 use anymo_tokenizer::owo::pretrain::{PretrainConfig, Pretrainer};
 use anymo_tokenizer::owo::{OwoConfig, SkeletonGraph};
 use anymo_tokenizer::tat::objective::{LossWeights, RootStats};
 use anymo_tokenizer::tat::rvq::RvqConfig;
-use anymo_tokenizer::tat::{Baseline, BaselineConfig, Codec, Fusion, Tat, TokenizerConfig};
+use anymo_tokenizer::tat::temporal::Upsampling;
+use anymo_tokenizer::tat::{Baseline, BaselineConfig, Codec, Fusion, Representation, Tat, TokenizerConfig};
 use anymo_tokenizer::text::CachedEncoder;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -162,8 +163,12 @@ pub struct TokenizerRecipe {
     pub continue_shipped: bool,
     /// Loss weights set by name; the others keep their defaults.
     pub weights: Vec<(String, f32)>,
-    /// Probability of rebasing a window's rest pose on one of its frames (NEC C.1).
+    /// Probability of rebasing a window on the pose of one of its frames (NEC C.1).
     pub rebase: f64,
+    /// The joint frames the codec reads motion in.
+    pub representation: Representation,
+    /// Batches per step, each of one skeleton.
+    pub skeletons_per_step: usize,
 }
 
 /// A codec's typed card configuration, as written and compared when a run continues.
@@ -174,8 +179,21 @@ enum CodecConfig {
     Baseline { baseline: BaselineConfig },
 }
 
+/// The training clips as the codec reads them, each skeleton's in its basis (see
+/// [`codecs::bases_by_topology`]).
+fn training_clips(clips: &[&ModelClip], representation: Representation) -> Vec<TrainingClip> {
+    let bases = codecs::bases_by_topology(representation, clips);
+    clips
+        .iter()
+        .map(|c| TrainingClip {
+            motion: bases[&data::topology(&c.motion)].enter(&c.motion),
+            source: c.item.source.clone(),
+        })
+        .collect()
+}
+
 /// Root statistics over the training clips' features.
-fn root_stats(clips: &[&ModelClip]) -> RootStats {
+fn root_stats(clips: &[TrainingClip]) -> RootStats {
     let mut all = Vec::new();
     for c in clips {
         let (f, _) = to_features(&canonicalise(&c.motion));
@@ -189,7 +207,9 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
     let weights = loss_weights(&recipe.weights)?;
     let clips = run.clips()?;
     let train_clips = train_split(&clips);
-    let stats = root_stats(&train_clips);
+    let representation = recipe.representation;
+    let motions = training_clips(&train_clips, representation);
+    let stats = root_stats(&motions);
     let name = recipe.name.clone().unwrap_or_else(|| recipe.variant.name().to_string());
     let rvq = RvqConfig { layers: recipe.rvq_layers, codes: recipe.codes, ..RvqConfig::default() };
     let global = encoder.encode(&[GLOBAL_NODE_TEXT])?.remove(0);
@@ -197,12 +217,22 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
     let (mut codec, config): (Box<dyn Codec>, CodecConfig) = match recipe.variant {
         Variant::Baseline => {
             let max_joints = clips.iter().map(|c| c.motion.skeleton().len()).max().unwrap_or(1);
-            let config = BaselineConfig { max_joints, dim: 256, blocks: 2, rvq, root: stats, weights };
+            let upsampling = Upsampling::Interpolate;
+            let config = BaselineConfig {
+                max_joints,
+                dim: 256,
+                blocks: 2,
+                upsampling,
+                rvq,
+                root: stats,
+                weights,
+                representation,
+            };
             (Box::new(Baseline::new(config.clone(), run.seed)?), CodecConfig::Baseline { baseline: config })
         }
         v => {
             let fusion = if v == Variant::TatAdditive { Fusion::Additive } else { Fusion::Film };
-            let mut config = TokenizerConfig::new(stats, fusion);
+            let mut config = TokenizerConfig::new(stats, fusion, representation);
             config.rvq = rvq;
             config.weights = weights;
             config.owo = OwoConfig::default();
@@ -229,11 +259,12 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
         warmup: 200.min((recipe.steps - start) / 10),
         seed: run.seed,
         batch_size: recipe.batch_size,
+        skeletons_per_step: recipe.skeletons_per_step,
+        window: 64,
         max_batch_joints: 16 * 24,
         rebase: recipe.rebase,
         save_every_seconds: run.save_every.as_secs(),
     };
-    let motions = train_clips.iter().map(|c| c.motion.clone()).collect();
     let mut graph_of = |s: &Skeleton| -> Result<SkeletonGraph> { Ok(SkeletonGraph::new(s, encoder)?) };
     let state = train::train_codec(codec.as_mut(), motions, &mut graph_of, &settings, &run.state(&name)?)?;
     let earlier_seconds = previous.as_ref().and_then(|card| card.metrics["train_seconds"].as_f64()).unwrap_or(0.0);

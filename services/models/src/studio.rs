@@ -13,8 +13,8 @@ use anymo_motion::motion::Motion;
 use anymo_motion::prep::clean::{CleanClip, CleanOptions, clean};
 use anymo_motion::skeleton::Skeleton;
 use anymo_tokenizer::owo::SkeletonGraph;
-use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, encode_whole};
+use anymo_tokenizer::tat::{Basis, Tat};
 use anymo_tokenizer::text::CachedEncoder;
 
 /// Longest motion one request may ask for, in seconds.
@@ -47,8 +47,12 @@ pub fn frames_of(seconds: f64) -> usize {
 pub struct Target {
     /// The user's skeleton as a one-frame rest pose (or the user's clip, for edits).
     pub source: Motion,
-    /// The cleaned skeleton (and motion) the models work on.
+    /// The cleaned skeleton (and motion).
     pub cleaned: CleanClip,
+    /// The joint frames the tokenizer reads the skeleton in.
+    pub basis: Basis,
+    /// The cleaned motion in that basis: what the models work on.
+    pub entered: Motion,
     /// Its skeleton graph.
     pub graph: SkeletonGraph,
     /// OwO's global embedding.
@@ -109,15 +113,17 @@ impl Studio {
     /// A user's clip to edit, with its codes and where it starts.
     pub fn clip(&mut self, motion: &Motion) -> Result<(Target, Codes, [f32; 3])> {
         let target = self.prepare(motion.clone(), cleaned_clip(motion)?)?;
-        let encoded = encode_whole(&mut self.tat, &target.graph, &target.cleaned.motion)?;
+        let encoded = encode_whole(&mut self.tat, &target.graph, &target.entered)?;
         let Tokens { codes, start, .. } = encoded.tokens;
         Ok((target, codes.into_iter().next().unwrap_or_default(), start))
     }
 
     fn prepare(&mut self, source: Motion, cleaned: CleanClip) -> Result<Target> {
-        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
+        let basis = Basis::of(self.tat.config().representation, cleaned.motion.skeleton(), [&cleaned.motion]);
+        let entered = basis.enter(&cleaned.motion);
+        let graph = Graphs::new(&mut self.encoder).of(entered.skeleton())?;
         let embedding = self.tat.skeleton_embedding(&graph)?;
-        Ok(Target { source, cleaned, graph, embedding })
+        Ok(Target { source, cleaned, basis, entered, graph, embedding })
     }
 
     /// New motion for a prompt on a target: `request.samples` code sequences.
@@ -199,13 +205,13 @@ impl Studio {
         frames: Option<usize>,
         target: &Target,
     ) -> Result<Vec<Motion>> {
-        let skeleton = target.cleaned.motion.skeleton();
+        let skeleton = target.entered.skeleton();
         samples
             .into_iter()
             .map(|codes| {
                 let mut tokens = Tokens::whole(codes, self.frames_per_token(), MODEL_FPS);
                 tokens.start = start;
-                let decoded = detokenize(&self.tat, &tokens, &target.graph, skeleton)?;
+                let decoded = target.basis.leave(&detokenize(&self.tat, &tokens, &target.graph, skeleton)?);
                 let decoded = decoded.slice(0, frames.unwrap_or(decoded.frames()));
                 Ok(target.cleaned.restore(&decoded, &target.source))
             })

@@ -8,9 +8,8 @@ use crate::checkpoint::Checkpoint;
 use crate::error::ModelError;
 use anymo_motion::motion::Motion;
 use anymo_motion::prep::clean::{CleanOptions, clean};
-use anymo_motion::skeleton::Skeleton;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
-use anymo_tokenizer::tat::{Tat, anchor};
+use anymo_tokenizer::tat::{Basis, Representation, Tat, anchor};
 use anymo_tokenizer::text::CachedEncoder;
 use serde::{Deserialize, Serialize};
 
@@ -46,27 +45,36 @@ impl TokenCodec {
         Ok(TokenCodec { tat, name: tokenizer.name().to_string(), steps: card.steps, encoder })
     }
 
-    /// A clip's tokens.
+    /// A clip's tokens. A tokenizer of the reference representation reads the clip against
+    /// its own mean pose.
     pub fn tokenize(&mut self, motion: &Motion) -> Result<TokenFile> {
         let cleaned = cleaned_clip(motion)?;
-        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
-        let tokens = tokenize(&mut self.tat, &graph, &cleaned.motion)?;
+        let basis = Basis::of(self.tat.config().representation, cleaned.motion.skeleton(), [&cleaned.motion]);
+        let entered = basis.enter(&cleaned.motion);
+        let graph = Graphs::new(&mut self.encoder).of(entered.skeleton())?;
+        let tokens = tokenize(&mut self.tat, &graph, &entered)?;
         Ok(TokenFile { model: self.name.clone(), model_steps: self.steps, tokens })
     }
 
-    /// Tokens as motion on `skeleton` (in its units, with its hierarchy and channels) at `fps`
-    /// frames per second, refused when they do not fit this checkpoint or do not describe a clip.
-    pub fn detokenize(&mut self, tokens: &Tokens, skeleton: &Skeleton, fps: f64) -> Result<Motion> {
+    /// Tokens as motion on `target`'s skeleton (in its units, with its hierarchy and channels)
+    /// at `fps` frames per second, refused when they do not fit this checkpoint or do not
+    /// describe a clip. A tokenizer of the reference representation writes the motion around
+    /// the mean pose of the target's frames, or its rest pose when it has none.
+    pub fn detokenize(&mut self, tokens: &Tokens, target: &Motion, fps: f64) -> Result<Motion> {
         self.check(tokens).map_err(ModelError::Refused)?;
         if !(fps > 0.0 && fps <= MAX_FPS) {
             return Err(ModelError::refused(format!("the frame rate must be in (0, {MAX_FPS}]; {fps} was asked")));
         }
-        let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
-        let cleaned = clean(&rest, &CleanOptions::default())
+        let representation = self.tat.config().representation;
+        let posed = representation == Representation::Reference && target.frames() > 0;
+        let source = if posed { target.clone() } else { Motion::rest_pose(target.skeleton(), 1.0 / MODEL_FPS) };
+        let cleaned = clean(&source, &CleanOptions::default())
             .map_err(|r| ModelError::refused(format!("the skeleton cannot be used as a target: {r}")))?;
-        let graph = Graphs::new(&mut self.encoder).of(cleaned.motion.skeleton())?;
-        let decoded = detokenize(&self.tat, tokens, &graph, cleaned.motion.skeleton())?;
-        let restored = cleaned.restore(&decoded, &rest);
+        let basis = Basis::of(representation, cleaned.motion.skeleton(), [&cleaned.motion]);
+        let skeleton = basis.enter(&cleaned.motion.slice(0, 1)).skeleton().clone();
+        let graph = Graphs::new(&mut self.encoder).of(&skeleton)?;
+        let decoded = basis.leave(&detokenize(&self.tat, tokens, &graph, &skeleton)?);
+        let restored = cleaned.restore(&decoded, &source);
         // The models run at MODEL_FPS; the answer comes at the rate asked for.
         Ok(if (restored.fps() - fps).abs() > 1e-9 { restored.resample(fps) } else { restored })
     }
@@ -110,9 +118,10 @@ impl TokenCodec {
         anchor::check(&tokens.anchors, tokens.frames)
     }
 
-    /// A clip moved onto `skeleton` through tokens, at `fps` frames per second.
-    pub fn transfer(&mut self, motion: &Motion, skeleton: &Skeleton, fps: f64) -> Result<Motion> {
+    /// A clip moved onto `target`'s skeleton through tokens, at `fps` frames per second (see
+    /// [`TokenCodec::detokenize`] for what the target's frames mean).
+    pub fn transfer(&mut self, motion: &Motion, target: &Motion, fps: f64) -> Result<Motion> {
         let file = self.tokenize(motion)?;
-        self.detokenize(&file.tokens, skeleton, fps)
+        self.detokenize(&file.tokens, target, fps)
     }
 }

@@ -2,9 +2,8 @@
 //! bar, checkpoints every few minutes and exact resumption after a kill.
 
 use anyhow::{Context, Result};
-use anymo_motion::motion::Motion;
-use anymo_tokenizer::dataset::{LoaderConfig, WindowLoader};
-use anymo_tokenizer::nn::{AdamW, AdamWConfig, ModelCard, Params};
+use anymo_tokenizer::dataset::{LoaderConfig, TrainingClip, WindowLoader};
+use anymo_tokenizer::nn::{AdamW, AdamWConfig, ModelCard, Params, snapshot};
 use anymo_tokenizer::owo::SkeletonGraph;
 use anymo_tokenizer::owo::pretrain::{Pretrainer, schedule};
 use anymo_tokenizer::tat::Codec;
@@ -19,9 +18,11 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-/// Where a run keeps its resumable state, apart from the checkpoint it ships.
+/// Where a run keeps its resumable state, apart from the checkpoint it ships: one file,
+/// `state.safetensors` (see [`anymo_tokenizer::nn::snapshot`]), replaced at every save, so it can
+/// be committed and a run continued on another machine.
 pub struct RunDir {
-    dir: PathBuf,
+    path: PathBuf,
 }
 
 /// What a run has done so far.
@@ -29,78 +30,43 @@ pub struct RunDir {
 pub struct RunState {
     /// Optimiser steps taken.
     pub step: u64,
-    /// Loader epoch in progress.
-    pub epoch: u64,
-    /// Batches of that epoch already used.
-    pub batch: usize,
     /// Seconds spent training so far.
     pub seconds: f64,
-    /// Subdirectory holding the parameters and optimiser of this state (run directories saved
-    /// before it was recorded kept them at the top).
-    #[serde(default)]
-    pub saved_in: Option<String>,
 }
 
 impl RunDir {
-    /// A run directory (created when missing).
+    /// The run state file in `dir` (created when missing).
     pub fn new(dir: &Path) -> Result<RunDir> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        Ok(RunDir { dir: dir.to_path_buf() })
+        Ok(RunDir { path: dir.join("state.safetensors") })
     }
 
-    /// The saved state, if the run was started before.
-    pub fn state(&self) -> Result<Option<RunState>> {
-        let path = self.dir.join("state.json");
-        if !path.exists() {
-            return Ok(None);
-        }
-        let text = std::fs::read_to_string(&path)?;
-        Ok(Some(serde_json::from_str(&text).with_context(|| format!("reading {}", path.display()))?))
+    /// The state file.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
-    /// Restores parameters and optimiser from the save that `state` records; returns the saved
-    /// buffers.
-    pub fn restore(
+    /// Restores parameters and optimiser when the run was started before; returns its state and
+    /// the saved buffers.
+    pub fn resume(
         &self,
-        state: &RunState,
         params: &mut Params,
         optimiser: &mut AdamW,
-    ) -> Result<HashMap<String, Tensor>> {
-        let dir = state.saved_in.as_ref().map_or_else(|| self.dir.clone(), |sub| self.dir.join(sub));
-        let rest = params.load(&dir.join("params.safetensors")).context("loading the run's parameters")?;
-        optimiser.load(&dir.join("optimiser.safetensors")).context("loading the run's optimiser state")?;
-        Ok(rest)
-    }
-
-    /// Saves parameters, optimiser and state. Weights go to a directory of their own; the state
-    /// that names it is renamed into place last, so a kill at any point leaves one consistent
-    /// save (the new one or the previous one), never new weights under an old step.
-    pub fn save(&self, params: &Params, optimiser: &AdamW, state: &RunState) -> Result<()> {
-        let sub = format!("save-{}", state.step);
-        let dir = self.dir.join(&sub);
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        params.save(&dir.join("params.safetensors"))?;
-        optimiser.save(&dir.join("optimiser.safetensors"))?;
-        let state = RunState { saved_in: Some(sub.clone()), ..state.clone() };
-        let tmp = self.dir.join("state.json.tmp");
-        std::fs::write(&tmp, serde_json::to_string_pretty(&state)?)?;
-        std::fs::rename(&tmp, self.dir.join("state.json"))?;
-        self.remove_saves_other_than(&sub)
-    }
-
-    /// Deletes earlier saves, and weights of the layout before `saved_in`, once a newer save is
-    /// in place.
-    fn remove_saves_other_than(&self, keep: &str) -> Result<()> {
-        for entry in std::fs::read_dir(&self.dir)? {
-            let entry = entry?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if name.starts_with("save-") && name != keep {
-                std::fs::remove_dir_all(entry.path())?;
-            } else if name == "params.safetensors" || name == "optimiser.safetensors" {
-                std::fs::remove_file(entry.path())?;
-            }
+    ) -> Result<Option<(RunState, HashMap<String, Tensor>)>> {
+        if snapshot::progress(&self.path)?.is_none() {
+            return Ok(None);
         }
-        Ok(())
+        let (progress, buffers) = snapshot::load(&self.path, params, optimiser)
+            .with_context(|| format!("resuming from {}", self.path.display()))?;
+        let state = serde_json::from_str(&progress).with_context(|| format!("reading {}", self.path.display()))?;
+        Ok(Some((state, buffers)))
+    }
+
+    /// Saves parameters, optimiser and state in one file, written beside and renamed over the
+    /// previous one, so a kill at any point leaves one whole save.
+    pub fn save(&self, params: &Params, optimiser: &AdamW, state: &RunState) -> Result<()> {
+        snapshot::save(&self.path, params, optimiser, &serde_json::to_string(state)?)
+            .with_context(|| format!("saving the run state to {}", self.path.display()))
     }
 }
 
@@ -146,8 +112,7 @@ pub fn pretrain_owo(
 ) -> Result<RunState> {
     let mut optimiser = AdamW::new(&pretrainer.params, AdamWConfig::default())?;
     let mut state = RunState::default();
-    if let Some(saved) = run.state()? {
-        run.restore(&saved, &mut pretrainer.params, &mut optimiser)?;
+    if let Some((saved, _)) = run.resume(&mut pretrainer.params, &mut optimiser)? {
         state = saved;
         eprintln!("resuming OwO pretraining at step {}", state.step);
     }
@@ -194,6 +159,12 @@ pub struct CodecTraining {
     pub seed: u64,
     /// Windows per batch (fewer for large skeletons).
     pub batch_size: usize,
+    /// Batches per step, each of one skeleton (cards from before it was recorded: 1).
+    #[serde(default = "one")]
+    pub skeletons_per_step: usize,
+    /// Frames per training window, at most (cards from before it was recorded: 64).
+    #[serde(default = "default_window")]
+    pub window: usize,
     /// Joints over all windows of a batch, at most.
     pub max_batch_joints: usize,
     /// Seconds between saves of the run state (cards from before it was recorded: 120).
@@ -203,6 +174,14 @@ pub struct CodecTraining {
     /// with 0.5).
     #[serde(default = "default_rebase")]
     pub rebase: f64,
+}
+
+fn one() -> usize {
+    1
+}
+
+fn default_window() -> usize {
+    64
 }
 
 fn default_save_every_seconds() -> u64 {
@@ -231,36 +210,39 @@ impl Running {
         mix(&mut self.parts.commitment, p.commitment);
         mix(&mut self.parts.heading, p.heading);
         mix(&mut self.parts.path, p.path);
+        mix(&mut self.parts.contact, p.contact);
+        mix(&mut self.parts.skating, p.skating);
         self.n += 1.0;
     }
 }
 
-/// Trains a codec on windows of `clips`; `graphs[g]` is the skeleton graph of loader group `g`.
+/// Trains a codec on windows of `clips`, `skeletons_per_step` batches of one skeleton each per
+/// step, the step's loss their mean.
 pub fn train_codec(
     codec: &mut dyn Codec,
-    clips: Vec<Motion>,
+    clips: Vec<TrainingClip>,
     graph_of: &mut dyn FnMut(&anymo_motion::skeleton::Skeleton) -> Result<SkeletonGraph>,
     settings: &CodecTraining,
     run: &RunDir,
 ) -> Result<RunState> {
     let mut optimiser = AdamW::new(codec.params(), AdamWConfig::default())?;
-    // A continued run starts at its checkpoint's step, with epochs numbered from there so that it
-    // draws new shuffles.
-    let mut state = RunState { step: settings.start, epoch: settings.start, ..RunState::default() };
-    if let Some(saved) = run.state()? {
-        let rest = run.restore(&saved, codec.params_mut(), &mut optimiser)?;
-        codec.restore_buffers(&rest)?;
+    // A continued run starts at its checkpoint's step.
+    let mut state = RunState { step: settings.start, ..RunState::default() };
+    if let Some((saved, buffers)) = run.resume(codec.params_mut(), &mut optimiser)? {
+        codec.restore_buffers(&buffers)?;
         state = saved;
-        eprintln!("resuming at step {} (epoch {}, batch {})", state.step, state.epoch, state.batch);
+        eprintln!("resuming at step {} from {}", state.step, run.path().display());
     }
     let config = LoaderConfig {
+        window: settings.window,
         batch_size: settings.batch_size,
+        skeletons_per_step: settings.skeletons_per_step,
         max_batch_joints: settings.max_batch_joints,
         seed: settings.seed,
         rebase: settings.rebase,
         ..LoaderConfig::default()
     };
-    let mut loader = WindowLoader::new(clips, config);
+    let loader = WindowLoader::new(clips, config);
     let graphs: Vec<SkeletonGraph> =
         (0..loader.groups()).map(|g| graph_of(loader.group_skeleton(g))).collect::<Result<_>>()?;
     let bar = progress(settings.steps, state.step);
@@ -270,46 +252,45 @@ pub fn train_codec(
     let mut running = Running::default();
     let mut frames = 0usize;
     let window_start = Instant::now();
-    'training: while state.step < settings.steps {
-        loader.reseed(settings.seed.wrapping_add(state.epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
-        let batches = loader.epoch()?;
-        for (index, batch) in batches.iter().enumerate().skip(state.batch) {
+    while state.step < settings.steps {
+        let batches = loader.step(state.step)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ state.step.wrapping_mul(0x2545_F491_4F6C_DD1D));
+        let mut total: Option<Tensor> = None;
+        for batch in &batches {
             let prepared = Prepared::new(batch, codec.root_stats())?;
-            let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ state.step.wrapping_mul(0x2545_F491_4F6C_DD1D));
             let out = codec.reconstruct(&prepared, &graphs[batch.group], true, &mut rng)?;
-            let (total, parts) =
-                loss(&out.prediction, &prepared, codec.root_stats(), &out.commitment, codec.weights())?;
-            let grads = total.backward()?;
-            optimiser.step(
-                codec.params(),
-                &grads,
-                schedule(settings.lr, settings.warmup, settings.steps - settings.start, state.step - settings.start),
-            )?;
+            let (loss, parts) = loss(&out.prediction, &prepared, codec.root_stats(), &out.commitment, codec.weights())?;
             running.add(&parts);
             frames += batch.sources.len() * batch.rotations.dim(1)?;
-            state.step += 1;
-            state.batch = index + 1;
-            state.seconds = started.elapsed().as_secs_f64();
-            bar.set_position(state.step);
-            let fps = frames as f64 / window_start.elapsed().as_secs_f64();
-            let r = &running.parts;
-            let message = format!(
-                "rot {:.4} pos {:.5} root {:.3} heading {:.4} path {:.4} vel {:.6} commit {:.4} | {fps:.0} frames/s",
-                r.rotation, r.position, r.root, r.heading, r.path, r.velocity, r.commitment
-            );
-            log.maybe(state.step, settings.steps, &message);
-            bar.set_message(message);
-            if last_save.elapsed() >= Duration::from_secs(settings.save_every_seconds) || state.step == settings.steps {
-                codec.sync_buffers()?;
-                run.save(codec.params(), &optimiser, &state)?;
-                last_save = Instant::now();
-            }
-            if state.step >= settings.steps {
-                break 'training;
-            }
+            let share = (loss / batches.len() as f64)?;
+            total = Some(match total {
+                Some(t) => (t + share)?,
+                None => share,
+            });
         }
-        state.epoch += 1;
-        state.batch = 0;
+        let grads = total.expect("a step has batches").backward()?;
+        optimiser.step(
+            codec.params(),
+            &grads,
+            schedule(settings.lr, settings.warmup, settings.steps - settings.start, state.step - settings.start),
+        )?;
+        state.step += 1;
+        state.seconds = started.elapsed().as_secs_f64();
+        bar.set_position(state.step);
+        let fps = frames as f64 / window_start.elapsed().as_secs_f64();
+        let r = &running.parts;
+        let message = format!(
+            "rot {:.4} pos {:.5} root {:.3} vel {:.6} contact {:.4} skate {:.6} heading {:.4} path {:.4} commit {:.4} | \
+             {fps:.0} frames/s",
+            r.rotation, r.position, r.root, r.velocity, r.contact, r.skating, r.heading, r.path, r.commitment
+        );
+        log.maybe(state.step, settings.steps, &message);
+        bar.set_message(message);
+        if last_save.elapsed() >= Duration::from_secs(settings.save_every_seconds) || state.step == settings.steps {
+            codec.sync_buffers()?;
+            run.save(codec.params(), &optimiser, &state)?;
+            last_save = Instant::now();
+        }
     }
     codec.sync_buffers()?;
     run.save(codec.params(), &optimiser, &state)?;
@@ -346,8 +327,7 @@ pub fn train_steps<M>(
 ) -> Result<RunState> {
     let mut optimiser = AdamW::new(params_mut(model), AdamWConfig::default())?;
     let mut state = RunState::default();
-    if let Some(saved) = run.state()? {
-        run.restore(&saved, params_mut(model), &mut optimiser)?;
+    if let Some((saved, _)) = run.resume(params_mut(model), &mut optimiser)? {
         state = saved;
         eprintln!("resuming at step {}", state.step);
     }
@@ -403,22 +383,20 @@ mod tests {
         let set = |params: &Params, v: f32| {
             params.vars().next().unwrap().1.set(&Tensor::new(&[v, v], &candle_core::Device::Cpu).unwrap()).unwrap()
         };
-        run.save(&params, &optimiser, &RunState { step: 1, ..RunState::default() }).unwrap();
+        run.save(&params, &optimiser, &RunState { step: 1, seconds: 1.0 }).unwrap();
         set(&params, 2.0);
-        run.save(&params, &optimiser, &RunState { step: 2, ..RunState::default() }).unwrap();
-        assert!(!dir.join("save-1").exists(), "a newer save replaces the older one");
+        run.save(&params, &optimiser, &RunState { step: 2, seconds: 2.0 }).unwrap();
+        let files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(files, ["state.safetensors"], "one file, replaced");
 
-        // A kill after the weights of step 3 were written but before its state was.
-        set(&params, 3.0);
-        std::fs::create_dir_all(dir.join("save-3")).unwrap();
-        params.save(&dir.join("save-3/params.safetensors")).unwrap();
+        // A kill while step 3 was being written leaves its temporary file half done.
+        std::fs::write(dir.join("state.safetensors.tmp"), b"half a header").unwrap();
 
-        let state = run.state().unwrap().unwrap();
-        assert_eq!(state.step, 2);
         let mut restored = Params::new(1);
         restored.constant("w", &[2], 0.0).unwrap();
         let mut optimiser = AdamW::new(&restored, AdamWConfig::default()).unwrap();
-        run.restore(&state, &mut restored, &mut optimiser).unwrap();
+        let (state, _) = run.resume(&mut restored, &mut optimiser).unwrap().unwrap();
+        assert_eq!(state.step, 2);
         assert_eq!(values(&restored), [2.0, 2.0], "step 2's weights, not the half-saved step 3's");
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -231,7 +231,7 @@ pub async fn edit(
 /// A clip moved onto another skeleton.
 pub async fn transfer(state: &AppState, clip: ClipSource, to: SkeletonSource) -> Result<Generated, ApiError> {
     let motion = state.clip(&clip).await?;
-    let (skeleton, fps) = state.target(&to).await?;
+    let (target, fps) = state.target(&to).await?;
     let record = serde_json::json!({
         "clip": match &clip { ClipSource::Stored(id) => serde_json::json!({ "clip_id": id }), ClipSource::Bvh(b) => serde_json::json!({ "uploaded_bytes": b.len() }) },
         "to": describe(&to),
@@ -239,7 +239,7 @@ pub async fn transfer(state: &AppState, clip: ClipSource, to: SkeletonSource) ->
     let moved = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
-            m.codec.transfer(&motion, &skeleton, fps).map_err(ApiError::from_model)
+            m.codec.transfer(&motion, &target, fps).map_err(ApiError::from_model)
         })
         .await?;
     keep(state, "transfer", record, vec![moved]).await
@@ -261,12 +261,12 @@ pub async fn detokenize(state: &AppState, tokens: TokenFile, to: SkeletonSource)
     if tokens.tokens.frames > state.limits.frames {
         return Err(ApiError::over_limit("frames of the tokens", state.limits.frames, tokens.tokens.frames));
     }
-    let (skeleton, fps) = state.target(&to).await?;
+    let (target, fps) = state.target(&to).await?;
     let record = serde_json::json!({ "model": tokens.model, "frames": tokens.tokens.frames, "to": describe(&to) });
     let motion = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
-            m.codec.detokenize(&tokens.tokens, &skeleton, fps).map_err(ApiError::from_model)
+            m.codec.detokenize(&tokens.tokens, &target, fps).map_err(ApiError::from_model)
         })
         .await?;
     keep(state, "detokenize", record, vec![motion]).await

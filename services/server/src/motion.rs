@@ -57,12 +57,14 @@ pub fn parse_bvh(state: &AppState, what: &str, bytes: &[u8], require_motion: boo
 impl AppState {
     /// The skeleton a request names.
     pub async fn skeleton(&self, source: &SkeletonSource) -> Result<Skeleton, ApiError> {
-        Ok(self.target(source).await?.0)
+        Ok(self.target(source).await?.0.skeleton().clone())
     }
 
-    /// The skeleton a request names and the frame rate motion decoded onto it takes: an
-    /// uploaded file's own, 30 for a stored skeleton (the rate the store keeps skeletons at).
-    pub async fn target(&self, source: &SkeletonSource) -> Result<(Skeleton, f64), ApiError> {
+    /// The skeleton a request names, with an uploaded file's frames when it has any (a
+    /// tokenizer of the reference representation poses motion around them), and the frame rate
+    /// motion decoded onto it takes: an uploaded file's own, 30 for a stored skeleton (the rate
+    /// the store keeps skeletons at).
+    pub async fn target(&self, source: &SkeletonSource) -> Result<(Motion, f64), ApiError> {
         let file = match source {
             SkeletonSource::Bvh(bytes) => parse_bvh(self, "the skeleton", bytes, false)?,
             SkeletonSource::Stored(id) => {
@@ -73,7 +75,7 @@ impl AppState {
                     .map_err(|e| ApiError::internal(format!("stored skeleton {id} does not parse: {e}")))?
             }
         };
-        Ok((file.skeleton().clone(), file.fps()))
+        Ok((Motion::from_bvh(&file), file.fps()))
     }
 
     /// The clip a request names, as motion.

@@ -1,30 +1,40 @@
-//! The training data loader: random windows of clips, augmented (mirroring, rest-pose
-//! rebasing, bone-length scaling), canonicalised, turned into model features and batched by
-//! skeleton into candle tensors. Deterministic for a seed (ChaCha8, whose stream is fixed
-//! across platforms and versions).
+//! The training data loader: windows of clips drawn per optimiser step, augmented (mirroring,
+//! reference-pose rebasing on one of the window's frames, bone-length scaling), canonicalised,
+//! turned into model features and batched by skeleton into candle tensors.
+//!
+//! Sampling is balanced so no corpus dominates: each batch draws a source with probability
+//! proportional to the square root of its frames, then a skeleton uniformly among that source's,
+//! then windows from that skeleton's clips in proportion to their frames. Windows hold only real
+//! frames: a batch whose shortest clip is shorter than a window has shorter windows. A step's
+//! batches depend only on the seed and the step number (ChaCha8, whose stream is fixed across
+//! platforms and versions), so a resumed run draws exactly what the killed one would have.
 
 use anymo_motion::features::{ROOT_DIMS, ROT_DIMS, canonicalise, to_features};
 use anymo_motion::motion::Motion;
-use anymo_motion::prep::augment::{mirror, rebase_rest_pose, scale_bones, symmetric_factors};
+use anymo_motion::prep::augment::{mirror, scale_bones, symmetric_factors};
+use anymo_motion::reference::ReferencePose;
 use candle_core::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
 
-/// How windows are cut and augmented.
+/// How windows are drawn and augmented.
 #[derive(Clone, Debug)]
 pub struct LoaderConfig {
-    /// Frames per window; shorter clips are padded (see [`Batch::mask`]).
+    /// Frames per window, at most.
     pub window: usize,
-    /// Windows per batch (at most; the last batch of a skeleton may be smaller).
+    /// Window lengths are whole multiples of this (the codec's frames per token).
+    pub frames_per_token: usize,
+    /// Windows per batch (fewer for large skeletons, see `max_batch_joints`).
     pub batch_size: usize,
+    /// Batches per step, each of one skeleton.
+    pub skeletons_per_step: usize,
     /// Seed of the random choices.
     pub seed: u64,
     /// Probability of mirroring a window (when its skeleton has left/right pairs).
     pub mirror: f64,
-    /// Probability of rebasing a window's rest pose on one of its frames (NEC C.1). Rebased
-    /// windows have rotations near the identity; real clips of rigs with bone-aligned frames
-    /// have rotations far from it, so a high share of rebased windows starves those.
+    /// Probability of rebasing a window on the pose of one of its frames (NEC C.1): the same
+    /// motion written on another reference pose, as a user's file may give one.
     pub rebase: f64,
     /// Bone lengths are scaled by factors drawn from `[1 - s, 1 + s]` (0 turns it off).
     pub bone_scale: f32,
@@ -37,7 +47,9 @@ impl Default for LoaderConfig {
     fn default() -> Self {
         LoaderConfig {
             window: 64,
+            frames_per_token: 4,
             batch_size: 16,
+            skeletons_per_step: 1,
             seed: 0,
             mirror: 0.5,
             rebase: 0.1,
@@ -47,10 +59,19 @@ impl Default for LoaderConfig {
     }
 }
 
-/// One batch: windows of clips that share a skeleton topology.
+/// A training clip and the corpus it comes from (sampling balances corpora).
+#[derive(Clone, Debug)]
+pub struct TrainingClip {
+    /// The cleaned motion.
+    pub motion: Motion,
+    /// Its source (corpus) name.
+    pub source: String,
+}
+
+/// One batch: windows of clips that share a skeleton.
 #[derive(Debug)]
 pub struct Batch {
-    /// Index of the skeleton group (clips with the same parents and joint names).
+    /// Index of the skeleton group (clips of one source with the same parents and joint names).
     pub group: usize,
     /// Parent of each joint.
     pub parents: Vec<Option<usize>>,
@@ -60,30 +81,53 @@ pub struct Batch {
     pub rotations: Tensor,
     /// `(B, J, 3)`: each window's rest offsets (augmentation changes them).
     pub offsets: Tensor,
-    /// `(B, T)`: 1 for real frames, 0 for padding after a short clip's end.
+    /// `(B, T)`: 1 for real frames, 0 for padding after a short clip's end (decoding pads;
+    /// training windows never do).
     pub mask: Tensor,
     /// For each window, the clip it came from and its first frame.
     pub sources: Vec<(usize, usize)>,
 }
 
-/// Windows of training clips, batched by skeleton.
+/// A corpus: its sampling weight and its skeleton groups.
+#[derive(Clone, Debug)]
+struct Source {
+    weight: f64,
+    groups: Vec<usize>,
+}
+
+/// Windows of training clips, batched by skeleton, drawn per step.
 pub struct WindowLoader {
     clips: Vec<Motion>,
     groups: Vec<Vec<usize>>,
+    sources: Vec<Source>,
     config: LoaderConfig,
-    rng: ChaCha8Rng,
 }
 
 impl WindowLoader {
-    /// A loader over cleaned clips (see [`anymo_motion::prep::clean`]).
-    pub fn new(clips: Vec<Motion>, config: LoaderConfig) -> WindowLoader {
-        let mut by_topology: BTreeMap<Vec<(Option<usize>, String)>, Vec<usize>> = BTreeMap::new();
+    /// A loader over cleaned clips (see [`anymo_motion::prep::clean`]); clips shorter than one
+    /// token are left out.
+    ///
+    /// # Panics
+    /// When no clip is at least one token long.
+    pub fn new(clips: Vec<TrainingClip>, config: LoaderConfig) -> WindowLoader {
+        type Topology = Vec<(Option<usize>, String)>;
+        let mut by_key: BTreeMap<(String, Topology), Vec<usize>> = BTreeMap::new();
+        let clips: Vec<TrainingClip> =
+            clips.into_iter().filter(|c| c.motion.frames() >= config.frames_per_token).collect();
+        assert!(!clips.is_empty(), "the loader needs a clip of at least {} frames", config.frames_per_token);
         for (i, clip) in clips.iter().enumerate() {
-            let key = clip.skeleton().joints().iter().map(|j| (j.parent, j.name.clone())).collect();
-            by_topology.entry(key).or_default().push(i);
+            let topology = clip.motion.skeleton().joints().iter().map(|j| (j.parent, j.name.clone())).collect();
+            by_key.entry((clip.source.clone(), topology)).or_default().push(i);
         }
-        let rng = ChaCha8Rng::seed_from_u64(config.seed);
-        WindowLoader { clips, groups: by_topology.into_values().collect(), config, rng }
+        let mut sources: BTreeMap<&str, Source> = BTreeMap::new();
+        for (g, ((source, _), members)) in by_key.iter().enumerate() {
+            let entry = sources.entry(source).or_insert(Source { weight: 0.0, groups: Vec::new() });
+            entry.weight += members.iter().map(|&c| clips[c].motion.frames() as f64).sum::<f64>();
+            entry.groups.push(g);
+        }
+        let sources = sources.into_values().map(|s| Source { weight: s.weight.sqrt(), ..s }).collect();
+        let groups = by_key.into_values().collect();
+        WindowLoader { clips: clips.into_iter().map(|c| c.motion).collect(), groups, sources, config }
     }
 
     /// The number of skeleton groups.
@@ -91,67 +135,53 @@ impl WindowLoader {
         self.groups.len()
     }
 
-    /// Restarts the random sequence from `seed` (a new epoch of a resumed run).
-    pub fn reseed(&mut self, seed: u64) {
-        self.rng = ChaCha8Rng::seed_from_u64(seed);
-    }
-
     /// The skeleton shared by the clips of a group (rest offsets of its first clip).
     pub fn group_skeleton(&self, group: usize) -> &anymo_motion::skeleton::Skeleton {
         self.clips[self.groups[group][0]].skeleton()
     }
 
-    /// One epoch: every clip gives one window per `window` frames of its length (at least one),
-    /// at random starts; windows are shuffled within their group and batched; batches of all
-    /// groups are shuffled.
-    pub fn epoch(&mut self) -> candle_core::Result<Vec<Batch>> {
-        let mut plans: Vec<(usize, Vec<(usize, usize)>)> = Vec::new();
-        for (g, members) in self.groups.iter().enumerate() {
-            let mut windows = Vec::new();
-            for &c in members {
-                let frames = self.clips[c].frames();
-                let count = (frames / self.config.window).max(1);
-                for _ in 0..count {
-                    let start = if frames > self.config.window {
-                        self.rng.random_range(0..=frames - self.config.window)
-                    } else {
-                        0
-                    };
-                    windows.push((c, start));
-                }
-            }
-            shuffle(&mut windows, &mut self.rng);
-            let joints = self.clips[members[0]].skeleton().len();
-            let size = self.config.batch_size.min(self.config.max_batch_joints / joints).max(1);
-            for batch in windows.chunks(size) {
-                plans.push((g, batch.to_vec()));
-            }
-        }
-        shuffle(&mut plans, &mut self.rng);
-        plans.into_iter().map(|(g, windows)| self.batch(g, windows)).collect()
+    /// The batches of optimiser step `step`: [`LoaderConfig::skeletons_per_step`] of them, each
+    /// of one skeleton.
+    pub fn step(&self, step: u64) -> candle_core::Result<Vec<Batch>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        (0..self.config.skeletons_per_step).map(|_| self.draw(&mut rng)).collect()
     }
 
-    fn batch(&mut self, group: usize, windows: Vec<(usize, usize)>) -> candle_core::Result<Batch> {
-        let t = self.config.window;
+    /// One batch: a source, one of its skeletons, and windows of its clips.
+    fn draw(&self, rng: &mut ChaCha8Rng) -> candle_core::Result<Batch> {
+        let source = &self.sources[pick(self.sources.iter().map(|s| s.weight), rng)];
+        let group = source.groups[rng.random_range(0..source.groups.len())];
+        let members = &self.groups[group];
+        let joints = self.clips[members[0]].skeleton().len();
+        let size = self.config.batch_size.min(self.config.max_batch_joints / joints).max(1);
+        let chosen: Vec<usize> =
+            (0..size).map(|_| members[pick(members.iter().map(|&c| self.clips[c].frames() as f64), rng)]).collect();
+        let shortest = chosen.iter().map(|&c| self.clips[c].frames()).min().expect("a window");
+        let per_token = self.config.frames_per_token;
+        let length = self.config.window.min(shortest) / per_token * per_token;
+        let windows = chosen.into_iter().map(|c| (c, rng.random_range(0..=self.clips[c].frames() - length))).collect();
+        self.batch(group, windows, length, rng)
+    }
+
+    fn batch(
+        &self,
+        group: usize,
+        windows: Vec<(usize, usize)>,
+        t: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> candle_core::Result<Batch> {
         let first = &self.clips[windows[0].0];
         let j = first.skeleton().len();
         let parents: Vec<Option<usize>> = first.skeleton().parents().collect();
         let b = windows.len();
         let (mut root, mut rotations) =
             (Vec::with_capacity(b * t * ROOT_DIMS), Vec::with_capacity(b * t * j * ROT_DIMS));
-        let (mut offsets, mut mask) = (Vec::with_capacity(b * j * 3), Vec::with_capacity(b * t));
+        let mut offsets = Vec::with_capacity(b * j * 3);
         for &(clip, start) in &windows {
-            let motion = self.window(clip, start);
-            let motion = self.augment(motion);
+            let motion = self.augment(self.clips[clip].slice(start, t), rng);
             let (features, _) = to_features(&canonicalise(&motion));
-            let real = features.frames;
-            for f in 0..t {
-                // Padding repeats the last real frame, masked out.
-                let src = f.min(real - 1);
-                root.extend_from_slice(&features.root[src * ROOT_DIMS..(src + 1) * ROOT_DIMS]);
-                rotations.extend_from_slice(&features.rotations[src * j * ROT_DIMS..(src + 1) * j * ROT_DIMS]);
-                mask.push(if f < real { 1.0f32 } else { 0.0 });
-            }
+            root.extend_from_slice(&features.root);
+            rotations.extend_from_slice(&features.rotations);
             offsets.extend(motion.skeleton().joints().iter().flat_map(|joint| joint.offset.to_array()));
         }
         let device = Device::Cpu;
@@ -161,35 +191,24 @@ impl WindowLoader {
             root: Tensor::from_vec(root, (b, t, ROOT_DIMS), &device)?,
             rotations: Tensor::from_vec(rotations, (b, t, j, ROT_DIMS), &device)?,
             offsets: Tensor::from_vec(offsets, (b, j, 3), &device)?,
-            mask: Tensor::from_vec(mask, (b, t), &device)?,
+            mask: Tensor::ones((b, t), candle_core::DType::F32, &device)?,
             sources: windows,
         })
     }
 
-    /// Frames `start..start + window` of a clip (fewer at its end).
-    fn window(&self, clip: usize, start: usize) -> Motion {
-        let m = &self.clips[clip];
-        let end = (start + self.config.window).min(m.frames());
-        let n = m.skeleton().len();
-        let rotations = m.all_rotations()[start * n..end * n].to_vec();
-        let translations = m.all_translations()[start * n..end * n].to_vec();
-        Motion::new(m.skeleton().clone(), m.frame_time(), rotations, translations).expect("a slice of a motion")
-    }
-
-    fn augment(&mut self, mut motion: Motion) -> Motion {
-        if self.rng.random_bool(self.config.mirror)
+    fn augment(&self, mut motion: Motion, rng: &mut ChaCha8Rng) -> Motion {
+        if rng.random_bool(self.config.mirror)
             && let Ok(mirrored) = mirror(&motion)
         {
             motion = mirrored;
         }
-        if self.rng.random_bool(self.config.rebase) {
-            let base = self.rng.random_range(0..motion.frames());
-            motion = rebase_rest_pose(&motion, base);
+        if rng.random_bool(self.config.rebase) {
+            let base = rng.random_range(0..motion.frames());
+            motion = ReferencePose::of_frame(&motion, base).rebase(&motion);
         }
         if self.config.bone_scale > 0.0 {
             let s = self.config.bone_scale;
-            let raw: Vec<f32> =
-                (0..motion.skeleton().len()).map(|_| self.rng.random_range(1.0 - s..=1.0 + s)).collect();
+            let raw: Vec<f32> = (0..motion.skeleton().len()).map(|_| rng.random_range(1.0 - s..=1.0 + s)).collect();
             let mut factors = symmetric_factors(motion.skeleton(), &raw);
             factors[0] = 1.0;
             motion = scale_bones(&motion, &factors);
@@ -198,11 +217,19 @@ impl WindowLoader {
     }
 }
 
-/// Fisher-Yates with the loader's generator (kept here so the order depends only on the seed).
-fn shuffle<T>(items: &mut [T], rng: &mut ChaCha8Rng) {
-    for i in (1..items.len()).rev() {
-        items.swap(i, rng.random_range(0..=i));
+/// An index drawn with probability proportional to its weight.
+fn pick(weights: impl Iterator<Item = f64> + Clone, rng: &mut ChaCha8Rng) -> usize {
+    let total: f64 = weights.clone().sum();
+    let mut x = rng.random_range(0.0..total);
+    let mut last = 0;
+    for (i, w) in weights.enumerate() {
+        if x < w {
+            return i;
+        }
+        x -= w;
+        last = i;
     }
+    last
 }
 
 #[cfg(test)]
@@ -232,43 +259,71 @@ mod tests {
         Motion::from_bvh(&parse_str(&text).unwrap())
     }
 
-    #[test]
-    fn batches_group_skeletons_and_pad_short_clips() {
-        let clips = vec![clip("Leg", 100), clip("Leg", 40), clip("Fin", 70)];
-        let config = LoaderConfig { window: 32, batch_size: 8, ..LoaderConfig::default() };
-        let mut loader = WindowLoader::new(clips, config);
-        assert_eq!(loader.groups(), 2);
-        let batches = loader.epoch().unwrap();
-        // 100 / 32 = 3 windows, 40 / 32 = 1, 70 / 32 = 2.
-        assert_eq!(batches.iter().map(|b| b.sources.len()).sum::<usize>(), 6);
-        for b in &batches {
-            let n = b.sources.len();
-            assert_eq!(b.rotations.dims(), &[n, 32, 3, ROT_DIMS]);
-            assert_eq!(b.root.dims(), &[n, 32, ROOT_DIMS]);
-            assert_eq!(b.offsets.dims(), &[n, 3, 3]);
-            assert!(b.sources.iter().all(|(c, _)| (*c == 2) == (b.group == 0)), "the Fin clip is alone in group 0");
-        }
-        let short = vec![clip("Leg", 10)];
-        let mut loader = WindowLoader::new(short, LoaderConfig { window: 16, ..LoaderConfig::default() });
-        let batch = loader.epoch().unwrap().remove(0);
-        let mask: Vec<f32> = batch.mask.flatten_all().unwrap().to_vec1().unwrap();
-        assert_eq!(mask.iter().sum::<f32>(), 10.0);
-        assert_eq!(&mask[9..11], &[1.0, 0.0]);
+    fn from(source: &str, motion: Motion) -> TrainingClip {
+        TrainingClip { motion, source: source.to_string() }
     }
 
     #[test]
-    fn the_same_seed_gives_the_same_batches() {
-        let make = |seed| {
-            let clips = vec![clip("Leg", 90), clip("Leg", 64)];
-            let mut loader = WindowLoader::new(clips, LoaderConfig { window: 24, seed, ..LoaderConfig::default() });
+    fn batches_hold_one_skeleton_and_only_real_frames() {
+        let clips = vec![from("a", clip("Leg", 100)), from("a", clip("Leg", 41)), from("b", clip("Fin", 70))];
+        let config = LoaderConfig { window: 32, batch_size: 8, skeletons_per_step: 3, ..LoaderConfig::default() };
+        let loader = WindowLoader::new(clips, config);
+        assert_eq!(loader.groups(), 2);
+        for step in 0..20 {
+            for b in loader.step(step).unwrap() {
+                let (n, t) = (b.sources.len(), b.rotations.dim(1).unwrap());
+                assert_eq!(n, 8);
+                assert!(t % 4 == 0 && t <= 32 && t > 0, "{t} frames");
+                assert_eq!(b.rotations.dims(), &[n, t, 3, ROT_DIMS]);
+                assert_eq!(b.root.dims(), &[n, t, ROOT_DIMS]);
+                assert_eq!(b.offsets.dims(), &[n, 3, 3]);
+                let frames = [100, 41, 70];
+                assert!(b.sources.iter().all(|&(c, start)| start + t <= frames[c]), "no window runs past its clip");
+                assert!(
+                    b.sources.iter().all(|(c, _)| (*c == 2) == (b.group == 1)),
+                    "the Fin clip is alone in its group"
+                );
+                assert_eq!(b.mask.sum_all().unwrap().to_scalar::<f32>().unwrap(), (n * t) as f32);
+            }
+        }
+    }
+
+    #[test]
+    fn sources_are_drawn_by_the_root_of_their_frames_and_skeletons_uniformly() {
+        // Source a: 1600 frames over two skeletons; source b: 400 frames over one. By the root
+        // of their frames a is drawn 40 / (40 + 20) = 2/3 of the time, and each of its two
+        // skeletons 1/3, whatever their own frame counts.
+        let mut clips: Vec<TrainingClip> = (0..15).map(|_| from("a", clip("Leg", 100))).collect();
+        clips.push(from("a", clip("Arm", 100)));
+        clips.extend((0..4).map(|_| from("b", clip("Fin", 100))));
+        let config = LoaderConfig { window: 16, batch_size: 1, seed: 5, ..LoaderConfig::default() };
+        let loader = WindowLoader::new(clips, config);
+        let mut counts = [0usize; 3];
+        let steps = 3000;
+        for step in 0..steps {
+            counts[loader.step(step).unwrap()[0].group] += 1;
+        }
+        let share = counts.map(|c| c as f64 / steps as f64);
+        for (got, want) in share.iter().zip([1.0 / 3.0; 3]) {
+            assert!((got - want).abs() < 0.03, "{share:?}");
+        }
+    }
+
+    #[test]
+    fn a_step_depends_only_on_the_seed_and_its_number() {
+        let make = |seed, step| {
+            let clips = vec![from("a", clip("Leg", 90)), from("a", clip("Leg", 64))];
+            let config = LoaderConfig { window: 24, seed, skeletons_per_step: 2, ..LoaderConfig::default() };
+            let loader = WindowLoader::new(clips, config);
             loader
-                .epoch()
+                .step(step)
                 .unwrap()
                 .into_iter()
                 .map(|b| (b.sources, b.rotations.flatten_all().unwrap().to_vec1::<f32>().unwrap()))
                 .collect::<Vec<_>>()
         };
-        assert_eq!(make(7), make(7));
-        assert_ne!(make(7), make(8));
+        assert_eq!(make(7, 3), make(7, 3));
+        assert_ne!(make(7, 3), make(8, 3));
+        assert_ne!(make(7, 3), make(7, 4));
     }
 }

@@ -3,5 +3,5 @@
 pub mod loader;
 pub mod split;
 
-pub use loader::{Batch, LoaderConfig, WindowLoader};
+pub use loader::{Batch, LoaderConfig, TrainingClip, WindowLoader};
 pub use split::{Split, split_of};

@@ -5,7 +5,6 @@ use super::params::Params;
 use candle_core::backprop::GradStore;
 use candle_core::{Device, Result, Tensor};
 use std::collections::{BTreeMap, HashMap};
-use std::path::Path;
 
 /// Optimiser settings.
 #[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
@@ -81,20 +80,19 @@ impl AdamW {
         Ok(norm)
     }
 
-    /// Saves the moments and step count.
-    pub fn save(&self, path: &Path) -> Result<()> {
+    /// The moments (`m/NAME`, `v/NAME`) and the step count (`step`), by name.
+    pub fn tensors(&self) -> Result<HashMap<String, Tensor>> {
         let mut map = HashMap::new();
         for (name, (m, v)) in &self.moments {
             map.insert(format!("m/{name}"), m.clone());
             map.insert(format!("v/{name}"), v.clone());
         }
         map.insert("step".to_string(), Tensor::new(&[self.step as f64], &Device::Cpu)?);
-        candle_core::safetensors::save(&map, path)
+        Ok(map)
     }
 
-    /// Restores what [`AdamW::save`] wrote.
-    pub fn load(&mut self, path: &Path) -> Result<()> {
-        let map = candle_core::safetensors::load(path, &Device::Cpu)?;
+    /// Restores what [`AdamW::tensors`] gave, for the same parameters.
+    pub fn assign(&mut self, map: &HashMap<String, Tensor>) -> Result<()> {
         for (name, (m, v)) in self.moments.iter_mut() {
             match (map.get(&format!("m/{name}")), map.get(&format!("v/{name}"))) {
                 (Some(sm), Some(sv)) if sm.dims() == m.dims() => {

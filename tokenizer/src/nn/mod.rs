@@ -22,6 +22,7 @@ pub mod layers;
 pub mod params;
 pub mod relu;
 pub mod repeat;
+pub mod snapshot;
 pub mod softmax;
 
 pub use adamw::{AdamW, AdamWConfig};

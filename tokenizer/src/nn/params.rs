@@ -83,11 +83,17 @@ impl Params {
         self.buffers.insert(name.to_string(), tensor);
     }
 
+    /// Every parameter and buffer by name.
+    pub fn tensors(&self) -> HashMap<String, Tensor> {
+        let mut map: HashMap<String, Tensor> =
+            self.vars.iter().map(|(k, v)| (k.clone(), v.as_tensor().clone())).collect();
+        map.extend(self.buffers.iter().map(|(k, t)| (k.clone(), t.clone())));
+        map
+    }
+
     /// Writes every parameter and buffer to a safetensors file.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let mut map: HashMap<&String, Tensor> = self.vars.iter().map(|(k, v)| (k, v.as_tensor().clone())).collect();
-        map.extend(self.buffers.iter().map(|(k, t)| (k, t.clone())));
-        candle_core::safetensors::save(&map, path)
+        candle_core::safetensors::save(&self.tensors(), path)
     }
 
     /// Overwrites every parameter with the file's value of the same name; a parameter missing from

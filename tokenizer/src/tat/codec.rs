@@ -3,8 +3,9 @@
 
 use super::model::{Decoder, Encoder, Fusion, OUTPUT_DIMS, TatConfig};
 use super::objective::{LossWeights, Prediction, Prepared, RootStats};
+use super::representation::Representation;
 use super::rvq::{Rvq, RvqConfig};
-use super::temporal::{Downsample, ResBlock, Upsample};
+use super::temporal::{Downsample, ResBlock, Upsample, Upsampling};
 use crate::nn::{LayerNorm, Linear, Params};
 use crate::owo::graph::{GraphBatch, SkeletonGraph, sinusoidal};
 use crate::owo::{Owo, OwoConfig};
@@ -92,11 +93,14 @@ pub struct TokenizerConfig {
     pub root: RootStats,
     /// Loss weights.
     pub weights: LossWeights,
+    /// The joint frames motion is read in (cards from before it was recorded: the rig's own).
+    #[serde(default)]
+    pub representation: Representation,
 }
 
 impl TokenizerConfig {
-    /// The default shape for given root statistics and fusion.
-    pub fn new(root: RootStats, fusion: Fusion) -> TokenizerConfig {
+    /// The default shape for given root statistics, fusion and representation.
+    pub fn new(root: RootStats, fusion: Fusion, representation: Representation) -> TokenizerConfig {
         let owo = OwoConfig::default();
         let offset_freqs = 4;
         TokenizerConfig {
@@ -108,6 +112,7 @@ impl TokenizerConfig {
                 spatial_layers: 2,
                 condition_dim: owo.dim + 6 * offset_freqs,
                 fusion,
+                upsampling: Upsampling::Interpolate,
             },
             rvq: RvqConfig::default(),
             owo,
@@ -116,6 +121,7 @@ impl TokenizerConfig {
             overlap: 16,
             root,
             weights: LossWeights::default(),
+            representation,
         }
     }
 }
@@ -241,12 +247,18 @@ pub struct BaselineConfig {
     pub dim: usize,
     /// Downsampling blocks.
     pub blocks: usize,
+    /// How the decoder doubles its frame rate (cards from before it was recorded: pairs).
+    #[serde(default)]
+    pub upsampling: Upsampling,
     /// Quantiser.
     pub rvq: RvqConfig,
     /// Root statistics.
     pub root: RootStats,
     /// Loss weights.
     pub weights: LossWeights,
+    /// The joint frames motion is read in (cards from before it was recorded: the rig's own).
+    #[serde(default)]
+    pub representation: Representation,
 }
 
 /// NEC Table 1's "RVQ-VAE (zero pad)": joints padded to the corpus maximum, flattened per frame,
@@ -287,7 +299,7 @@ impl Baseline {
                 Ok((
                     ResBlock::new(&mut p, &format!("up{i}/res0"), d, 3)?,
                     ResBlock::new(&mut p, &format!("up{i}/res1"), d, 1)?,
-                    Upsample::new(&mut p, &format!("up{i}"), d)?,
+                    Upsample::new(&mut p, &format!("up{i}"), d, config.upsampling)?,
                 ))
             })
             .collect::<Result<_>>()?;

@@ -7,9 +7,11 @@ pub mod codec;
 pub mod fk;
 pub mod model;
 pub mod objective;
+pub mod representation;
 pub mod rvq;
 pub mod temporal;
 pub mod window;
 
 pub use codec::{Baseline, BaselineConfig, Codec, Tat, TokenizerConfig};
 pub use model::{Fusion, TatConfig};
+pub use representation::{Basis, Representation};

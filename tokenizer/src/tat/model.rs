@@ -2,7 +2,7 @@
 //! by the joint's OwO embedding, spatio-temporal blocks over the joints plus one virtual joint,
 //! and a decoder that broadcasts the quantised virtual joint to the target skeleton's joints.
 
-use super::temporal::{Downsample, ResBlock, Upsample};
+use super::temporal::{Downsample, ResBlock, Upsample, Upsampling, interpolate};
 use crate::nn::{LayerNorm, Linear, Params, TransformerLayer, relu, repeat_dim1, repeat_rows};
 use candle_core::{D, Result, Tensor};
 use serde::{Deserialize, Serialize};
@@ -40,6 +40,9 @@ pub struct TatConfig {
     pub condition_dim: usize,
     /// How the condition enters.
     pub fusion: Fusion,
+    /// How the decoder doubles its frame rate (cards from before it was recorded: pairs).
+    #[serde(default)]
+    pub upsampling: Upsampling,
 }
 
 impl TatConfig {
@@ -148,6 +151,7 @@ pub struct Decoder {
     blocks: Vec<DecoderBlock>,
     res: ResBlock,
     output: Linear,
+    upsampling: Upsampling,
 }
 
 fn spatial_stack(p: &mut Params, c: &TatConfig) -> Result<Vec<TransformerLayer>> {
@@ -211,7 +215,7 @@ impl Decoder {
                         Ok(DecoderBlock {
                             spatial: spatial_stack(p, c)?,
                             res: [ResBlock::new(p, "res0", c.dim, 3)?, ResBlock::new(p, "res1", c.dim, 1)?],
-                            up: Upsample::new(p, "up", c.dim)?,
+                            up: Upsample::new(p, "up", c.dim, c.upsampling)?,
                         })
                     })
                 })
@@ -221,13 +225,18 @@ impl Decoder {
                 modulation: Modulation::new(p, "modulation", c.condition_dim, c.dim, c.fusion)?,
                 blocks,
                 res: ResBlock::new(p, "res", c.dim, 1)?,
-                output: Linear::with_std(p, "output", c.dim, 2 * OUTPUT_DIMS, true, 0.01)?,
+                output: match c.upsampling {
+                    Upsampling::Pairs => Linear::with_std(p, "output", c.dim, 2 * OUTPUT_DIMS, true, 0.01)?,
+                    Upsampling::Interpolate => Linear::with_std(p, "output", c.dim, OUTPUT_DIMS, true, 0.01)?,
+                },
+                upsampling: c.upsampling,
             })
         })
     }
 
-    /// `latent (B, T', code)`, target `condition (B, J, c)` -> `(B, T' 2^(blocks+1), J, OUTPUT_DIMS)`;
-    /// the last layer writes frame pairs (a stride-2 transposed convolution).
+    /// `latent (B, T', code)`, target `condition (B, J, c)` -> `(B, T' 2^(blocks+1), J, OUTPUT_DIMS)`.
+    /// The last doubling is the output layer writing frame pairs, or, when interpolating,
+    /// interpolation before the last residual block and the output layer.
     pub fn forward(&self, latent: &Tensor, condition: &Tensor) -> Result<Tensor> {
         let z = self.latent.forward(latent)?.unsqueeze(2)?;
         let (b, t, _, d) = z.dims4()?;
@@ -239,7 +248,12 @@ impl Decoder {
             x = spatial(&block.spatial, &x)?;
             x = temporal(&x, |s| block.up.forward(&block.res[1].forward(&block.res[0].forward(s)?)?))?;
         }
-        let x = temporal(&x.narrow(2, 0, joints)?, |s| self.res.forward(s))?;
+        let x = x.narrow(2, 0, joints)?;
+        if self.upsampling == Upsampling::Interpolate {
+            let x = temporal(&x, |s| self.res.forward(&interpolate(s)?))?;
+            return self.output.forward(&x);
+        }
+        let x = temporal(&x, |s| self.res.forward(s))?;
         let (b, t, j, _) = x.dims4()?;
         self.output.forward(&x)?.reshape((b, t, j, 2, OUTPUT_DIMS))?.transpose(2, 3)?.reshape((
             b,

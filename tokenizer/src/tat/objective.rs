@@ -66,7 +66,7 @@ pub struct Prepared {
     pub root: Tensor,
     /// `(B, T, J, 3)` target positions (root at the origin of the heading frame, at its height).
     pub positions: Tensor,
-    /// `(B, T, J)` 1 where a joint is low and still.
+    /// `(B, T, J)` 1 where a joint is low and still in the world.
     pub contacts: Tensor,
     /// `(B, T)` real frames.
     pub mask: Tensor,
@@ -89,6 +89,29 @@ pub fn velocities(x: &Tensor) -> Result<Tensor> {
     Tensor::cat(&[&diff, &x.narrow(1, 0, 1)?.zeros_like()?], 1)
 }
 
+/// How far each joint moves in the world from each frame to the next, in the heading frame of
+/// the first `(B, T, J, 3)`, the last frame zero: `positions` are root-centred in each frame's
+/// heading frame and `root` holds the raw root features (yaw rate, planar velocity, height), so
+/// the step is `R_y(yaw) p[t + 1] + v - p[t]`. A planted foot of a walk is still here while it
+/// moves backwards under the root in `positions`.
+pub fn world_velocities(positions: &Tensor, root: &Tensor) -> Result<Tensor> {
+    let t = positions.dim(1)?;
+    let channel = |k: usize| root.narrow(1, 0, t - 1)?.narrow(D::Minus1, k, 1)?.unsqueeze(D::Minus1);
+    let (yaw, vx, vz) = (channel(0)?, channel(1)?, channel(2)?);
+    let (cos, sin) = (yaw.cos()?, yaw.sin()?);
+    let next = positions.narrow(1, 1, t - 1)?;
+    let (x, y, z) = (next.narrow(D::Minus1, 0, 1)?, next.narrow(D::Minus1, 1, 1)?, next.narrow(D::Minus1, 2, 1)?);
+    let turned_x = (x.broadcast_mul(&cos)? + z.broadcast_mul(&sin)?)?.broadcast_add(&vx)?;
+    let turned_z = (z.broadcast_mul(&cos)? - x.broadcast_mul(&sin)?)?.broadcast_add(&vz)?;
+    let moved = (Tensor::cat(&[&turned_x, &y, &turned_z], D::Minus1)? - positions.narrow(1, 0, t - 1)?)?;
+    Tensor::cat(&[&moved, &positions.narrow(1, 0, 1)?.zeros_like()?], 1)
+}
+
+/// The horizontal part `(…, 2)` of velocities `(…, 3)`.
+fn planar(v: &Tensor) -> Result<Tensor> {
+    Tensor::cat(&[&v.narrow(D::Minus1, 0, 1)?, &v.narrow(D::Minus1, 2, 1)?], D::Minus1)
+}
+
 impl Prepared {
     /// Builds inputs and targets from a loader batch.
     pub fn new(batch: &Batch, stats: &RootStats) -> Result<Prepared> {
@@ -102,8 +125,8 @@ impl Prepared {
             Tensor::cat(&[&root.unsqueeze(2)?, &Tensor::zeros((b, t, j - 1, 4), root.dtype(), root.device())?], 2)?;
         let input = Tensor::cat(&[&batch.rotations, &root_slot, &positions, &(&velocity * 10.0)?], D::Minus1)?;
         let low = positions.narrow(D::Minus1, 1, 1)?.squeeze(D::Minus1)?.lt(CONTACT_HEIGHT)?;
-        let planar = Tensor::cat(&[&velocity.narrow(D::Minus1, 0, 1)?, &velocity.narrow(D::Minus1, 2, 1)?], D::Minus1)?;
-        let slow = planar.sqr()?.sum(D::Minus1)?.sqrt()?.lt(CONTACT_SPEED)?;
+        let world = planar(&world_velocities(&positions, &batch.root)?)?;
+        let slow = world.sqr()?.sum(D::Minus1)?.sqrt()?.lt(CONTACT_SPEED)?;
         let contacts = (low.to_dtype(candle_core::DType::F32)? * slow.to_dtype(candle_core::DType::F32)?)?;
         Ok(Prepared {
             input,
@@ -141,7 +164,8 @@ pub struct LossWeights {
     pub velocity: f32,
     /// Contact classification.
     pub contact: f32,
-    /// Foot sliding while the truth is in contact.
+    /// Foot sliding in the world (the decoded root's motion included) while the truth is in
+    /// contact.
     pub skating: f32,
     /// RVQ commitment.
     pub commitment: f32,
@@ -241,8 +265,9 @@ pub fn loss(
     let v_pred = velocities(&positions)?;
     let v_true = velocities(&truth.positions)?;
     let velocity = masked_mean(&(&v_pred - &v_true)?.sqr()?, mask)?;
-    let planar = Tensor::cat(&[&v_pred.narrow(D::Minus1, 0, 1)?, &v_pred.narrow(D::Minus1, 2, 1)?], D::Minus1)?;
-    let skating = masked_mean(&(planar.sqr()?.sum(D::Minus1)? * &truth.contacts)?, mask)?;
+    let root_pred = stats.denormalise(&prediction.root)?;
+    let sliding = planar(&world_velocities(&positions, &root_pred)?)?;
+    let skating = masked_mean(&(sliding.sqr()?.sum(D::Minus1)? * &truth.contacts)?, mask)?;
     let contact = match &prediction.contacts {
         Some(logits) => {
             // Binary cross-entropy with logits: softplus(x) - y x.
@@ -252,7 +277,7 @@ pub fn loss(
         None => Tensor::new(0f32, &Device::Cpu)?,
     };
     let (heading_true, path_true) = trajectory(&stats.denormalise(&truth.root)?, mask)?;
-    let (heading_pred, path_pred) = trajectory(&stats.denormalise(&prediction.root)?, mask)?;
+    let (heading_pred, path_pred) = trajectory(&root_pred, mask)?;
     let heading = masked_mean(&(heading_pred - heading_true)?.sqr()?, mask)?;
     let path = masked_mean(&(path_pred - path_true)?.sqr()?.sum(D::Minus1)?, mask)?;
     let mut total = ((&rotation * w.rotation as f64)?
@@ -288,6 +313,34 @@ pub fn loss(
 mod tests {
     use super::*;
     use std::f32::consts::FRAC_PI_2;
+
+    #[test]
+    fn a_foot_planted_under_a_moving_turning_root_is_still_in_the_world() {
+        use anymo_motion::features::{ROOT_DIMS, root_path};
+        // The root walks 0.1 forward and turns 0.2 rad per frame; a foot planted in the world at
+        // (0.3, 0, 1) is seen from the root's heading frame, where it moves every frame.
+        let frames = 4;
+        let rows = vec![[0.2f32, 0.0, 0.1, 0.5]; frames];
+        let features = anymo_motion::features::MotionFeatures {
+            frames,
+            joints: 1,
+            root: rows.iter().flatten().copied().collect(),
+            rotations: vec![0.0; frames * 6],
+        };
+        assert_eq!(ROOT_DIMS, 4);
+        let foot = glam::Vec3::new(0.3, 0.0, 1.0);
+        let seen: Vec<[f32; 3]> = root_path(&features)
+            .into_iter()
+            .map(|(heading, planar)| (glam::Quat::from_rotation_y(heading).inverse() * (foot - planar)).to_array())
+            .collect();
+        let flat: Vec<f32> = seen.into_iter().flatten().collect();
+        let positions = Tensor::from_vec(flat, (1, frames, 1, 3), &Device::Cpu).unwrap();
+        let root = Tensor::from_vec(features.root.clone(), (1, frames, 4), &Device::Cpu).unwrap();
+        let world: Vec<f32> = world_velocities(&positions, &root).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        assert!(world.iter().all(|v| v.abs() < 1e-5), "{world:?}");
+        let local: Vec<f32> = velocities(&positions).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        assert!(local.iter().any(|v| v.abs() > 0.05), "seen from the root it moves: {local:?}");
+    }
 
     #[test]
     fn trajectory_integrates_turns_and_steps_like_the_features_do() {

@@ -142,9 +142,9 @@ fn run_tokenizer(args: TokenizerArgs, command: &str) -> Result<()> {
                 metrics["measured_by"] = command.into();
             })?;
         }
-        if let Some(transfer) = &report.transfer {
+        for (name, transfer) in &report.transfer {
             let transfer = serde_json::to_value(transfer)?;
-            eval::record(dir, "tat", |metrics| metrics["transfer"] = transfer)?;
+            eval::record(dir, name, |metrics| metrics["transfer"] = transfer)?;
         }
     }
     c.write_json(&report.json(command)?)

@@ -82,14 +82,16 @@ fn load(args: &ModelArgs) -> Result<TokenCodec> {
 
 /// The skeleton of a BVH file (its motion, if any, is not needed).
 pub(super) fn read_skeleton(path: &Path) -> Result<Skeleton> {
-    Ok(read_target(path)?.0)
+    Ok(read_target(path)?.0.skeleton().clone())
 }
 
 /// The skeleton of a BVH file and the file's frame rate, which motion decoded onto it takes.
-fn read_target(path: &Path) -> Result<(Skeleton, f64)> {
+/// The target of a detokenize or transfer: its skeleton, with its frames when it has any (a
+/// tokenizer of the reference representation poses the result around them), and its frame rate.
+fn read_target(path: &Path) -> Result<(Motion, f64)> {
     let clip =
         bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
-    Ok((clip.skeleton().clone(), 1.0 / clip.frame_time()))
+    Ok((Motion::from_bvh(&clip), 1.0 / clip.frame_time()))
 }
 
 pub(super) fn write_bvh(motion: &Motion, path: &Path) -> Result<()> {
@@ -115,15 +117,15 @@ pub fn run_detokenize(args: DetokenizeArgs) -> Result<()> {
     let file: TokenFile = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a tokens file from `anymo tokenize`", args.tokens.display()))?;
     let mut codec = load(&args.model)?;
-    let (skeleton, file_fps) = read_target(&args.skeleton)?;
-    let motion = codec.detokenize(&file.tokens, &skeleton, args.fps.unwrap_or(file_fps))?;
+    let (target, file_fps) = read_target(&args.skeleton)?;
+    let motion = codec.detokenize(&file.tokens, &target, args.fps.unwrap_or(file_fps))?;
     write_bvh(&motion, &args.output)
 }
 
 pub fn run_transfer(args: TransferArgs) -> Result<()> {
     let mut codec = load(&args.model)?;
     let motion = input::read_motion(&args.input, args.animation.as_deref())?;
-    let (skeleton, file_fps) = read_target(&args.to)?;
-    let moved = codec.transfer(&motion, &skeleton, args.fps.unwrap_or(file_fps))?;
+    let (target, file_fps) = read_target(&args.to)?;
+    let moved = codec.transfer(&motion, &target, args.fps.unwrap_or(file_fps))?;
     write_bvh(&moved, &args.output)
 }

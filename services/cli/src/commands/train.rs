@@ -7,6 +7,7 @@ use anyhow::Result;
 use anymo_generator::generate::Kind;
 use anymo_models::recipe::{self, EvaluatorRecipe, GeneratorRecipe, Run, TokenizerRecipe};
 use anymo_tokenizer::dataset::LoaderConfig;
+use anymo_tokenizer::tat::Representation;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -164,9 +165,17 @@ struct TokenizerArgs {
     /// integrated over each window; off by default); the others keep their defaults.
     #[arg(long = "weight", value_name = "NAME=VALUE", value_parser = parse_weight)]
     weights: Vec<(String, f32)>,
-    /// Probability of rebasing a window's rest pose on one of its frames (NEC C.1).
+    /// Probability of rebasing a window on the pose of one of its frames (NEC C.1).
     #[arg(long, default_value_t = LoaderConfig::default().rebase)]
     rebase: f64,
+    /// The joint frames the codec reads motion in: `reference` (frames world-aligned at each
+    /// skeleton's mean pose, facing +Z: no rig convention shows) or `rest` (each rig's own
+    /// frames and BVH rest pose, as tokenizer v1).
+    #[arg(long, default_value = "reference")]
+    representation: Representation,
+    /// Batches per optimiser step, each of one skeleton.
+    #[arg(long, default_value_t = 2)]
+    skeletons_per_step: usize,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -193,6 +202,8 @@ pub fn run(args: Args) -> Result<()> {
                 continue_shipped: a.continue_shipped,
                 weights: a.weights,
                 rebase: a.rebase,
+                representation: a.representation,
+                skeletons_per_step: a.skeletons_per_step,
             };
             recipe::train_tokenizer(&run, &recipe, &mut encoder)?;
         }

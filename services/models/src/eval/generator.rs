@@ -6,8 +6,8 @@
 use super::Table;
 use super::tokenizer::{CONTACT_HEIGHT, FOOT_BAND};
 use crate::checkpoint::Checkpoints;
-use crate::codecs::Graphs;
-use crate::data::ModelClip;
+use crate::codecs::{Graphs, bases_by_topology};
+use crate::data::{ModelClip, topology};
 use crate::generation::{self, is_human, token_clips};
 use anyhow::Result;
 use anymo_generator::evaluator::{fid, mm_dist, r_precision};
@@ -118,8 +118,10 @@ fn evaluate(
 
     // Each model's codes (or the real clip's own, for the tokenizer's row) decoded on the clip's
     // skeleton by the tokenizer they belong to, re-encoded and scored like the real motion.
+    let bases = bases_by_topology(tat.config().representation, test);
     let mut score = |codes: Codes, i: usize, decoder: Option<&Tat>, tat: &mut Tat| -> Result<Scored> {
-        let skeleton = motions[i].motion.skeleton();
+        let entered = bases[&topology(&motions[i].motion)].enter(&motions[i].motion.slice(0, 1));
+        let skeleton = entered.skeleton();
         let graph = Graphs::new(encoder).of(skeleton)?;
         let tokens = Tokens::whole(codes, per_token, motions[i].motion.fps());
         let motion = detokenize(decoder.unwrap_or(&*tat), &tokens, &graph, skeleton)?;

@@ -9,8 +9,8 @@
 use super::{Table, f};
 use crate::card::CodecCard;
 use crate::checkpoint::Checkpoints;
-use crate::codecs::{self, Graphs};
-use crate::data::ModelClip;
+use crate::codecs::{self, Graphs, bases_by_topology};
+use crate::data::{ModelClip, topology};
 use anyhow::Result;
 use anymo_motion::features::{canonicalise, foot_joints};
 use anymo_motion::kinematics::all_joint_positions;
@@ -22,7 +22,7 @@ use anymo_motion::motion::Motion;
 use anymo_motion::prep::augment::turn_joint_frames;
 use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
-use anymo_tokenizer::tat::{Codec, Tat};
+use anymo_tokenizer::tat::{Basis, Codec, Representation, Tat};
 use anymo_tokenizer::text::CachedEncoder;
 use glam::Quat;
 use rand::{Rng, SeedableRng};
@@ -231,23 +231,26 @@ impl Reconstruction {
     }
 }
 
-/// Runs every clip through the codec.
+/// Runs every clip through the codec, each read in its basis (`bases[k]` for `clips[k]`) and
+/// measured back in its rig's own joint frames.
 pub fn reconstruction(
     codec: &mut dyn Codec,
     graphs: &mut Graphs,
     clips: &[&ModelClip],
+    bases: &[Basis],
     window: usize,
     overlap: usize,
 ) -> Result<Reconstruction> {
     let mut out = Reconstruction::default();
-    for clip in clips {
-        let graph = graphs.of(clip.motion.skeleton())?;
-        match reconstruct(codec, &graph, &clip.motion, window, overlap) {
+    for (clip, basis) in clips.iter().zip(bases) {
+        let entered = basis.enter(&clip.motion);
+        let graph = graphs.of(entered.skeleton())?;
+        match reconstruct(codec, &graph, &entered, window, overlap) {
             Ok(r) => out.groups.entry((clip.split.as_str().to_string(), clip.item.source.clone())).or_default().add(
-                &r.truth,
-                &r.anchored,
-                &r.free,
-                &r.true_root,
+                &basis.leave(&r.truth),
+                &basis.leave(&r.anchored),
+                &basis.leave(&r.free),
+                &basis.leave(&r.true_root),
             ),
             Err(_) => out.refused += 1,
         }
@@ -255,10 +258,28 @@ pub fn reconstruction(
     Ok(out)
 }
 
+/// The basis each of `measured` is read in by a codec of `representation`, from clips other
+/// than itself: for a rig with training clips among `all`, theirs (as in training); for any
+/// other rig, the other clips of that rig in `all`; for a rig with no other clip, its rest pose.
+pub fn held_bases(representation: Representation, all: &[&ModelClip], measured: &[&ModelClip]) -> Vec<Basis> {
+    let train: Vec<&ModelClip> = all.iter().copied().filter(|c| c.split == Split::Train).collect();
+    let seen = bases_by_topology(representation, &train);
+    measured
+        .iter()
+        .map(|clip| {
+            let key = topology(&clip.motion);
+            seen.get(&key).cloned().unwrap_or_else(|| {
+                let others = all.iter().filter(|c| !std::ptr::eq(**c, *clip) && topology(&c.motion) == key);
+                Basis::of(representation, clip.motion.skeleton(), others.map(|c| &c.motion))
+            })
+        })
+        .collect()
+}
+
 /// A clip held still: every joint but the root keeps its mean local rotation over the clip, and
 /// the root moves as it does in the clip. A reference for the table: a tokenizer that keeps no
 /// motion but the root's would score this.
-pub fn static_pose(motion: &Motion) -> Motion {
+pub fn static_pose(motion: &Motion, _: &Basis) -> Motion {
     let (n, frames) = (motion.skeleton().len(), motion.frames());
     let mean: Vec<glam::Quat> = (0..n)
         .map(|j| {
@@ -278,13 +299,13 @@ pub fn static_pose(motion: &Motion) -> Motion {
         .expect("the clip's own shapes")
 }
 
-/// A reference that is no model: each clip replaced by `hold` of itself (such as
-/// [`static_pose`] or [`rest_hold`]), grouped like [`reconstruction`].
-pub fn held_reference(clips: &[&ModelClip], hold: fn(&Motion) -> Motion) -> Reconstruction {
+/// A reference that is no model: each clip replaced by `hold` of itself and its basis (such as
+/// [`static_pose`], [`rest_hold`] or [`reference_hold`]), grouped like [`reconstruction`].
+pub fn held_reference(clips: &[&ModelClip], bases: &[Basis], hold: fn(&Motion, &Basis) -> Motion) -> Reconstruction {
     let mut out = Reconstruction::default();
-    for clip in clips {
+    for (clip, basis) in clips.iter().zip(bases) {
         let truth = canonicalise(&clip.motion);
-        let held = hold(&truth);
+        let held = hold(&truth, basis);
         out.groups
             .entry((clip.split.as_str().to_string(), clip.item.source.clone()))
             .or_default()
@@ -296,7 +317,7 @@ pub fn held_reference(clips: &[&ModelClip], hold: fn(&Motion) -> Motion) -> Reco
 /// A clip held in its rig's rest pose: every joint but the root at the identity local rotation,
 /// the root exactly as in the clip. What a tokenizer that kept only the root would give, on a rig
 /// whose rest pose is a real pose; on a rig whose rest pose lies on its side, far worse.
-pub fn rest_hold(motion: &Motion) -> Motion {
+pub fn rest_hold(motion: &Motion, _: &Basis) -> Motion {
     let n = motion.skeleton().len();
     let rotations =
         motion.all_rotations().iter().enumerate().map(|(k, q)| if k % n == 0 { *q } else { Quat::IDENTITY }).collect();
@@ -304,16 +325,24 @@ pub fn rest_hold(motion: &Motion) -> Motion {
         .expect("the clip's own shapes")
 }
 
+/// A clip held in its basis's reference pose: [`rest_hold`] in the basis, so every joint but the
+/// root keeps the reference's rotation and the root moves exactly as in the clip. What a
+/// tokenizer of the reference representation that kept only the root would give.
+pub fn reference_hold(motion: &Motion, basis: &Basis) -> Motion {
+    basis.leave(&rest_hold(&basis.enter(motion), basis))
+}
+
 /// The clips re-expressed on rigs whose every joint frame is turned by a random rotation
-/// (seeded by the clip's place in `clips`, uniform over rotations): the same world motion on rigs
-/// of other local-axis conventions and other rest poses.
+/// (uniform over rotations, the same for every clip of a rig: seeded by the rig's joint names):
+/// the same world motion on rigs of other local-axis conventions and other rest poses.
 pub fn with_turned_frames(clips: &[&ModelClip]) -> Vec<ModelClip> {
     clips
         .iter()
-        .enumerate()
-        .map(|(k, clip)| {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(k as u64);
-            let turns: Vec<Quat> = (0..clip.motion.skeleton().len()).map(|_| uniform_rotation(&mut rng)).collect();
+        .map(|clip| {
+            let names: Vec<&str> = clip.motion.skeleton().joints().iter().map(|j| j.name.as_str()).collect();
+            let seed = u64::from_le_bytes(blake3::hash(names.join("/").as_bytes()).as_bytes()[..8].try_into().unwrap());
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let turns: Vec<Quat> = names.iter().map(|_| uniform_rotation(&mut rng)).collect();
             ModelClip { item: clip.item.clone(), split: clip.split, motion: turn_joint_frames(&clip.motion, &turns) }
         })
         .collect()
@@ -371,27 +400,40 @@ fn pearson(x: &[f64], y: &[f64]) -> f64 {
     cov / (vx * vy).sqrt().max(1e-12)
 }
 
-/// Transfers `sources` onto `target` (a cleaned clip whose skeleton and feet are the target's).
+/// A transfer target: a cleaned clip whose skeleton and feet are the target's, and the basis
+/// it is read in.
+pub struct Rig<'a> {
+    /// The clip.
+    pub clip: &'a ModelClip,
+    /// Its basis.
+    pub basis: &'a Basis,
+}
+
+/// Transfers `sources` (each read in its basis, `bases[k]` for `sources[k]`) onto `target`.
+/// Every motion is measured in its rig's own joint frames.
 pub fn transfer(
     tat: &mut Tat,
     graphs: &mut Graphs,
     name: &str,
     sources: &[&ModelClip],
-    target: &ModelClip,
+    bases: &[Basis],
+    target: Rig,
 ) -> Result<TransferScores> {
-    let target_skeleton = target.motion.skeleton();
-    let target_graph = graphs.of(target_skeleton)?;
-    let feet = foot_joints(&target.motion, FOOT_BAND);
+    let target_skeleton = target.basis.enter(&target.clip.motion.slice(0, 1)).skeleton().clone();
+    let target_graph = graphs.of(&target_skeleton)?;
+    let feet = foot_joints(&target.clip.motion, FOOT_BAND);
     let (mut cycle, mut recon, mut fs, mut gp, mut frames) = (0f64, 0f64, 0f64, 0f64, 0f64);
     let mut originals = Vec::new();
     let mut transferred = Vec::new();
-    for clip in sources {
-        let graph = graphs.of(clip.motion.skeleton())?;
-        let tokens = tokenize(tat, &graph, &clip.motion)?;
-        let own = detokenize(tat, &tokens, &graph, clip.motion.skeleton())?;
-        let moved = detokenize(tat, &tokens, &target_graph, target_skeleton)?;
+    for (clip, basis) in sources.iter().zip(bases) {
+        let entered = basis.enter(&clip.motion);
+        let graph = graphs.of(entered.skeleton())?;
+        let tokens = tokenize(tat, &graph, &entered)?;
+        let own = detokenize(tat, &tokens, &graph, entered.skeleton())?;
+        let moved = detokenize(tat, &tokens, &target_graph, &target_skeleton)?;
         let back_tokens = tokenize(tat, &target_graph, &moved)?;
-        let back = detokenize(tat, &back_tokens, &graph, clip.motion.skeleton())?;
+        let back = detokenize(tat, &back_tokens, &graph, entered.skeleton())?;
+        let moved = target.basis.leave(&moved);
         let n = clip.motion.skeleton().len();
         let truth = all_joint_positions(&clip.motion);
         let w = clip.motion.frames() as f64;
@@ -407,7 +449,7 @@ pub fn transfer(
     let frames = frames.max(1.0);
     Ok(TransferScores {
         name: name.to_string(),
-        target: format!("{} ({} joints)", target.item.subject, target_skeleton.len()),
+        target: format!("{} ({} joints)", target.clip.item.subject, target_skeleton.len()),
         clips: sources.len(),
         cycle_mpjpe: cycle / frames,
         reconstruction_mpjpe: recon / frames,
@@ -421,6 +463,9 @@ pub fn transfer(
 pub const STATIC_REFERENCE: &str = "static pose (reference)";
 /// The other reference row's name: each clip held in its rig's rest pose (see [`rest_hold`]).
 pub const REST_REFERENCE: &str = "rest pose (reference)";
+/// The third reference row's name: each clip held in a reference pose of its rig taken from
+/// other clips (see [`reference_hold`] and [`held_bases`]), the root exact.
+pub const REFERENCE_HOLD: &str = "reference pose (reference)";
 
 /// The baseline's windows when measured (its card has none: NEC Table 1's protocol).
 const BASELINE_WINDOW: usize = 64;
@@ -429,13 +474,13 @@ const BASELINE_OVERLAP: usize = 16;
 
 /// What `anymo eval tokenizer` measures.
 pub struct TokenizerReport {
-    /// The reconstruction tables (per split, per source, GeoDist by joint kind) and, when TAT
-    /// was measured, its transfer table, as Markdown.
+    /// The reconstruction tables (per split, per source, GeoDist by joint kind) and each TAT's
+    /// transfer table, as Markdown.
     pub markdown: String,
     /// Each model's scores per split and per source, then the static reference's, by name.
     pub reconstruction: Vec<(String, serde_json::Map<String, serde_json::Value>)>,
-    /// TAT's transfers, when `tat` was among the models.
-    pub transfer: Option<Vec<TransferScores>>,
+    /// Each TAT's transfers, by name.
+    pub transfer: Vec<(String, Vec<TransferScores>)>,
 }
 
 impl TokenizerReport {
@@ -443,8 +488,9 @@ impl TokenizerReport {
     pub fn json(&self, command: &str) -> Result<serde_json::Value> {
         let mut out: serde_json::Map<String, serde_json::Value> =
             self.reconstruction.iter().map(|(k, v)| (k.clone(), serde_json::Value::Object(v.clone()))).collect();
-        if let Some(transfer) = &self.transfer {
-            out.insert("transfer".into(), serde_json::to_value(transfer)?);
+        if !self.transfer.is_empty() {
+            let by_model = self.transfer.iter().map(|(k, v)| Ok((k.clone(), serde_json::to_value(v)?)));
+            out.insert("transfer".into(), serde_json::Value::Object(by_model.collect::<Result<_>>()?));
         }
         out.insert("command".into(), command.into());
         Ok(serde_json::Value::Object(out))
@@ -452,9 +498,10 @@ impl TokenizerReport {
 }
 
 /// Reconstruction of the test and zero-shot clips of `clips` by each named codec of `set`,
-/// beside the two references; with `invariance`, each codec again on the same clips with turned
-/// joint frames; and, when `tat` is among them, its transfers (`transfer_clips` source clips per
-/// direction).
+/// each clip read in a basis taken from other clips of its rig (see [`held_bases`]), beside the
+/// three references; with `invariance`, each codec again on the same clips with turned joint
+/// frames; and for each TAT among them, its transfers (`transfer_clips` source clips per
+/// direction, none when 0).
 pub fn evaluate_tokenizers(
     set: &Checkpoints,
     names: &[String],
@@ -463,40 +510,58 @@ pub fn evaluate_tokenizers(
     invariance: bool,
     encoder: &mut CachedEncoder,
 ) -> Result<TokenizerReport> {
+    let all: Vec<&ModelClip> = clips.iter().collect();
     let eval_clips: Vec<&ModelClip> = clips.iter().filter(|c| c.split != Split::Train).collect();
     eprintln!("{} test and zero-shot clips", eval_clips.len());
-    let reference = held_reference(&eval_clips, static_pose);
+    let rest_bases = vec![Basis::Rest; eval_clips.len()];
+    let reference_bases = held_bases(Representation::Reference, &all, &eval_clips);
+    let bases = |representation| match representation {
+        Representation::Rest => &rest_bases,
+        Representation::Reference => &reference_bases,
+    };
+    let reference = held_reference(&eval_clips, &rest_bases, static_pose);
     let mut tables = Tables::new(&reference);
-    let turned_clips = if invariance { with_turned_frames(&eval_clips) } else { Vec::new() };
-    let turned_refs: Vec<&ModelClip> = turned_clips.iter().collect();
+    let turned_all = if invariance { with_turned_frames(&all) } else { Vec::new() };
+    let turned_refs: Vec<&ModelClip> = turned_all.iter().filter(|c| c.split != Split::Train).collect();
+    let turned_all_refs: Vec<&ModelClip> = turned_all.iter().collect();
+    let turned_reference_bases = held_bases(Representation::Reference, &turned_all_refs, &turned_refs);
+    let turned_bases = |representation| match representation {
+        Representation::Rest => &rest_bases,
+        Representation::Reference => &turned_reference_bases,
+    };
     let mut reconstruction = Vec::new();
+    let mut transfer = Vec::new();
     for name in names {
         let (mut codec, card) = codecs::load(&set.get(name), encoder)?;
-        let (window, overlap) = match &card.config {
-            CodecCard::Tokenizer(t) => (t.tokenizer.window, t.tokenizer.overlap),
-            CodecCard::Baseline(_) => (BASELINE_WINDOW, BASELINE_OVERLAP),
+        let (window, overlap, representation) = match &card.config {
+            CodecCard::Tokenizer(t) => (t.tokenizer.window, t.tokenizer.overlap, t.tokenizer.representation),
+            CodecCard::Baseline(b) => (BASELINE_WINDOW, BASELINE_OVERLAP, b.baseline.representation),
         };
         let mut graphs = Graphs::new(encoder);
-        let own = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, window, overlap)?;
+        let own =
+            self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, bases(representation), window, overlap)?;
         reconstruction.push((name.clone(), tables.add(name, &own)?));
         if invariance {
-            let turned = self::reconstruction(codec.as_mut(), &mut graphs, &turned_refs, window, overlap)?;
+            let on = turned_bases(representation);
+            let turned = self::reconstruction(codec.as_mut(), &mut graphs, &turned_refs, on, window, overlap)?;
             let label = format!("{name} (turned frames)");
             reconstruction.push((label.clone(), tables.add(&label, &turned)?));
             tables.compare_rigs(name, &own, &turned);
         }
+        if matches!(card.config, CodecCard::Tokenizer(_)) && transfer_clips > 0 {
+            drop(codec);
+            transfer.push((name.clone(), transfers(set, name, clips, transfer_clips, encoder)?));
+        }
     }
     reconstruction.push((STATIC_REFERENCE.to_string(), tables.add(STATIC_REFERENCE, &reference)?));
-    let rest = held_reference(&eval_clips, rest_hold);
+    let rest = held_reference(&eval_clips, &rest_bases, rest_hold);
     reconstruction.push((REST_REFERENCE.to_string(), tables.add(REST_REFERENCE, &rest)?));
+    let held = held_reference(&eval_clips, &reference_bases, reference_hold);
+    reconstruction.push((REFERENCE_HOLD.to_string(), tables.add(REFERENCE_HOLD, &held)?));
     let mut markdown = tables.into_text();
-    let transfer = if names.iter().any(|m| m == "tat") {
-        let transfers = transfers(set, clips, transfer_clips, encoder)?;
-        markdown.push_str(&format!("\n{}", transfer_table(&transfers)));
-        Some(transfers)
-    } else {
-        None
-    };
+    for (name, transfers) in &transfer {
+        markdown.push_str(&format!("\n{name}\n\n{}", transfer_table(transfers)));
+    }
     Ok(TokenizerReport { markdown, reconstruction, transfer })
 }
 
@@ -696,14 +761,19 @@ impl Tables {
 }
 
 /// Human -> human of other proportions, human -> quadruped, quadruped -> quadruped, each from
-/// test clips onto a skeleton of another subject.
+/// test clips onto a skeleton of another subject, by the TAT checkpoint `model`. Sources are read
+/// in bases held out as in [`held_bases`]; a target in the basis of its own clip, as a user's
+/// target file gives it.
 fn transfers(
     set: &Checkpoints,
+    model: &str,
     clips: &[ModelClip],
     per_direction: usize,
     encoder: &mut CachedEncoder,
 ) -> Result<Vec<TransferScores>> {
-    let (mut tat, _) = set.get("tat").load_tat(encoder)?;
+    let (mut tat, _) = set.get(model).load_tat(encoder)?;
+    let representation = tat.config().representation;
+    let all: Vec<&ModelClip> = clips.iter().collect();
     let mut graphs = Graphs::new(encoder);
     let pick = |source: &str, split: Split| -> Vec<&ModelClip> {
         clips.iter().filter(|c| c.item.source == source && c.split == split).take(per_direction).collect()
@@ -724,7 +794,10 @@ fn transfers(
         if sources.is_empty() {
             continue;
         }
-        out.push(transfer(&mut tat, &mut graphs, name, sources, target)?);
+        let source_bases = held_bases(representation, &all, sources);
+        let target_basis = Basis::of(representation, target.motion.skeleton(), [&target.motion]);
+        let rig = Rig { clip: target, basis: &target_basis };
+        out.push(transfer(&mut tat, &mut graphs, name, sources, &source_bases, rig)?);
     }
     Ok(out)
 }

@@ -13,6 +13,7 @@ use anymo_generator::Evaluator;
 use anymo_motion::motion::Motion;
 use anymo_retrieval::{ClipDocument, Entry, Filter, Library, Query, Space, Spaces, Weights};
 use anymo_store::{IndexRecord, Store};
+use anymo_tokenizer::tat::Basis;
 use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::encode_whole;
 use anymo_tokenizer::text::CachedEncoder;
@@ -100,8 +101,10 @@ impl SearchModels {
         if motion.frames() < 2 {
             return Err(ModelError::refused("the clip is too short to search by (it needs at least two frames)"));
         }
+        let basis = Basis::of(self.tat.config().representation, motion.skeleton(), [motion]);
+        let motion = basis.enter(motion);
         let graph = Graphs::new(&mut self.encoder).of(motion.skeleton())?;
-        let latent = encode_whole(&mut self.tat, &graph, motion)?.latent;
+        let latent = encode_whole(&mut self.tat, &graph, &motion)?.latent;
         let config = self.evaluator.config();
         let window = config.max_tokens * config.latent_dim;
         let mut sum = vec![0f32; self.spaces.motions.dim];
