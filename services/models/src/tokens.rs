@@ -71,7 +71,7 @@ impl TokenCodec {
         let cleaned = clean(&source, &CleanOptions::default())
             .map_err(|r| ModelError::refused(format!("the skeleton cannot be used as a target: {r}")))?;
         let basis = Basis::of(representation, cleaned.motion.skeleton(), [&cleaned.motion]);
-        let skeleton = basis.enter(&cleaned.motion.slice(0, 1)).skeleton().clone();
+        let skeleton = basis.enter_skeleton(&cleaned.motion);
         let graph = Graphs::new(&mut self.encoder).of(&skeleton)?;
         let decoded = basis.leave(&detokenize(&self.tat, tokens, &graph, &skeleton)?);
         let restored = cleaned.restore(&decoded, &source);

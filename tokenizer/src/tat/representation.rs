@@ -68,6 +68,12 @@ impl Basis {
         }
     }
 
+    /// The skeleton of `motion` as the codec reads it (its offsets in this basis), without
+    /// rebasing more than one frame.
+    pub fn enter_skeleton(&self, motion: &Motion) -> anymo_motion::skeleton::Skeleton {
+        self.enter(&motion.slice(0, 1)).skeleton().clone()
+    }
+
     /// Motion the codec wrote, back in the rig's frames: the inverse of [`Basis::enter`].
     pub fn leave(&self, motion: &Motion) -> Motion {
         match self {

@@ -120,8 +120,7 @@ fn evaluate(
     // skeleton by the tokenizer they belong to, re-encoded and scored like the real motion.
     let bases = bases_by_topology(tat.config().representation, test);
     let mut score = |codes: Codes, i: usize, decoder: Option<&Tat>, tat: &mut Tat| -> Result<Scored> {
-        let entered = bases[&topology(&motions[i].motion)].enter(&motions[i].motion.slice(0, 1));
-        let skeleton = entered.skeleton();
+        let skeleton = &bases[&topology(&motions[i].motion)].enter_skeleton(&motions[i].motion);
         let graph = Graphs::new(encoder).of(skeleton)?;
         let tokens = Tokens::whole(codes, per_token, motions[i].motion.fps());
         let motion = detokenize(decoder.unwrap_or(&*tat), &tokens, &graph, skeleton)?;

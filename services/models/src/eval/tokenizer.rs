@@ -419,7 +419,7 @@ pub fn transfer(
     bases: &[Basis],
     target: Rig,
 ) -> Result<TransferScores> {
-    let target_skeleton = target.basis.enter(&target.clip.motion.slice(0, 1)).skeleton().clone();
+    let target_skeleton = target.basis.enter_skeleton(&target.clip.motion);
     let target_graph = graphs.of(&target_skeleton)?;
     let feet = foot_joints(&target.clip.motion, FOOT_BAND);
     let (mut cycle, mut recon, mut fs, mut gp, mut frames) = (0f64, 0f64, 0f64, 0f64, 0f64);
