@@ -122,18 +122,24 @@ pub fn gunzip(from: &Path, to: &Path) {
     std::fs::write(to, text).expect("a writable scratch file");
 }
 
-/// Waits (up to 10 minutes) until a training run's saved state reaches `step`.
+/// Waits until a training run's one-file state (`state.safetensors`) records `step`; panics
+/// after 10 minutes, so a run that never saves fails the test instead of passing it late.
 pub fn wait_for_saved_step(state: &Path, step: u64) {
     let started = std::time::Instant::now();
     loop {
-        let done = std::fs::read_to_string(state)
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        let done = anymo_tokenizer::nn::snapshot::progress(state)
+            .expect("a readable run state")
+            .and_then(|p| serde_json::from_str::<serde_json::Value>(&p).ok())
             .and_then(|v| v["step"].as_u64())
             .unwrap_or(0);
-        if done >= step || started.elapsed() > std::time::Duration::from_secs(600) {
+        if done >= step {
             return;
         }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(600),
+            "{} did not reach step {step} in 10 minutes (it is at {done})",
+            state.display()
+        );
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }

@@ -55,7 +55,7 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     let masked = |name: &str| train("generator", name, &[&["--name", name][..], &tiny].concat());
     ok(anymo(&models, &masked("straight")).output().unwrap());
     let mut child = anymo(&models, &masked("killed")).stderr(std::process::Stdio::null()).spawn().unwrap();
-    wait_for_saved_step(&dir.join("runs/killed/state.json"), 2);
+    wait_for_saved_step(&dir.join("runs/killed/state.safetensors"), 2);
     child.kill().unwrap();
     child.wait().unwrap();
     let resumed = ok(anymo(&models, &masked("killed")).output().unwrap());

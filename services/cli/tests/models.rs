@@ -72,7 +72,7 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
     };
     ok(anymo(&models, &strs(&tat("straight"))).output().unwrap());
     let mut child = anymo(&models, &strs(&tat("killed"))).stderr(std::process::Stdio::null()).spawn().unwrap();
-    wait_for_saved_step(&dir.join("runs/killed/state.json"), 2);
+    wait_for_saved_step(&dir.join("runs/killed/state.safetensors"), 2);
     child.kill().unwrap();
     child.wait().unwrap();
     let resumed = ok(anymo(&models, &strs(&tat("killed"))).output().unwrap());
