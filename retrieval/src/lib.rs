@@ -3,6 +3,7 @@
 //! filters, persisted on disk and updated in place. The crate knows nothing of the store or of
 //! the models that make the vectors; `anymo-services` feeds it.
 
+pub mod benchmark;
 pub mod document;
 pub mod filter;
 pub mod fusion;

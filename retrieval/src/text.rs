@@ -232,6 +232,30 @@ impl TextIndex {
             .collect())
     }
 
+    /// The share of `text`'s searchable words (after stop words and stemming) that at least one
+    /// indexed clip holds in a searched field; 0 when the text has no searchable word. A query
+    /// worded unlike the library shares few words with it, and its BM25 list is then made of
+    /// incidental matches.
+    pub fn known_share(&self, text: &str) -> tantivy::Result<f32> {
+        let searcher = self.reader.searcher();
+        let mut analyzer = self.index.tokenizer_for_field(self.fields.captions)?;
+        let mut words = Vec::new();
+        analyzer.token_stream(text).process(&mut |token| words.push(token.text.clone()));
+        words.sort();
+        words.dedup();
+        let f = self.fields;
+        let mut known = 0;
+        for word in &words {
+            for field in [f.captions, f.subject, f.path, f.source, f.labels] {
+                if searcher.doc_freq(&Term::from_field_text(field, word))? > 0 {
+                    known += 1;
+                    break;
+                }
+            }
+        }
+        Ok(if words.is_empty() { 0.0 } else { known as f32 / words.len() as f32 })
+    }
+
     /// Something that marks `text`'s words in captions.
     pub fn highlighter(&self, text: &str) -> tantivy::Result<Highlighter> {
         let searcher = self.reader.searcher();

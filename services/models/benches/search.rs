@@ -141,12 +141,7 @@ fn main() {
         .iter()
         .step_by(base.len() / 8)
         .filter_map(|e| e.motion_vector.clone())
-        .map(|m| Query {
-            motion_vector: Some(m),
-            weights: Weights { bm25: 0.0, captions: 0.0, motions: 1.0 },
-            limit: 10,
-            ..Query::default()
-        })
+        .map(|m| Query { motion_vector: Some(m), weights: Weights::new(0.0, 0.0, 1.0), limit: 10, ..Query::default() })
         .collect();
 
     // The reference: one pass of dot products over every caption and motion vector.
@@ -169,12 +164,12 @@ fn main() {
     let dogs = Filter { subject: Some("dog".into()), ..Filter::default() };
     let rows: [(&str, Vec<Query>); 7] = [
         ("hybrid top-10", all(Weights::default(), Filter::default())),
-        ("BM25 only", all(Weights { bm25: 1.0, captions: 0.0, motions: 0.0 }, Filter::default())),
-        ("vectors only", all(Weights { bm25: 0.0, captions: 1.0, motions: 1.0 }, Filter::default())),
+        ("BM25 only", all(Weights::new(1.0, 0.0, 0.0), Filter::default())),
+        ("vectors only", all(Weights::new(0.0, 1.0, 1.0), Filter::default())),
         ("hybrid, --subject dog", all(Weights::default(), dogs)),
         ("by example (motion vectors)", examples),
-        ("caption vectors only", all(Weights { bm25: 0.0, captions: 1.0, motions: 0.0 }, Filter::default())),
-        ("motion vectors only (text)", all(Weights { bm25: 0.0, captions: 0.0, motions: 1.0 }, Filter::default())),
+        ("caption vectors only", all(Weights::new(0.0, 1.0, 0.0), Filter::default())),
+        ("motion vectors only (text)", all(Weights::new(0.0, 0.0, 1.0), Filter::default())),
     ];
     println!("{} clips, 1 thread, {RUNS} queries each, top 10:", library.len());
     for (name, queries) in rows {

@@ -5,11 +5,13 @@
 use super::context::{StoreArgs, checkpoints, writable_checkpoints};
 use super::generate::SamplingArgs;
 use super::search::WeightArgs;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use anymo_models::checkpoint::Checkpoint;
 use anymo_models::data::ModelClip;
+use anymo_models::eval::retrieval::Hybrid;
 use anymo_models::eval::{self, generator, retrieval, tokenizer};
 use anymo_models::search::SearchModels;
+use anymo_retrieval::benchmark;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -26,7 +28,8 @@ enum What {
     Tokenizer(TokenizerArgs),
     /// Text-to-motion on the test split by MoMask's protocol, GT row beside the generators.
     Generator(GeneratorArgs),
-    /// Search on the test split: text -> motion and motion -> motion, per retriever.
+    /// Search on the test split: held-out captions, paraphrases and motion by example, per
+    /// retriever.
     Retrieval(RetrievalArgs),
 }
 
@@ -72,6 +75,14 @@ struct RetrievalArgs {
     /// The hybrid row's weights.
     #[command(flatten)]
     weights: WeightArgs,
+    /// Choose the hybrid row's weights on the paraphrase benchmark's development half instead
+    /// (the best MRR that keeps held-out caption queries' R@10), and print what was tried.
+    #[arg(long, conflicts_with_all = ["bm25_weight", "caption_weight", "motion_weight", "bm25_known_exponent"])]
+    calibrate: bool,
+    /// A paraphrase benchmark (tab-separated query and relevant caption terms, as the shipped
+    /// one) [default: the shipped benchmark].
+    #[arg(long)]
+    paraphrases: Option<PathBuf>,
     #[command(flatten)]
     common: Common,
 }
@@ -178,7 +189,20 @@ fn run_retrieval(args: RetrievalArgs, command: &str) -> Result<()> {
     let test: Vec<&ModelClip> = clips.iter().collect();
     let evaluator: Checkpoint = checkpoints(c.dir.as_deref()).get(&args.evaluator);
     let mut models = SearchModels::load(&evaluator, CachedEncoder::new(c.store.encoder()?))?;
-    let rows = retrieval::evaluate(&mut models, &test, args.weights.weights())?;
-    println!("{}", retrieval::markdown(&rows));
-    c.write_json(&serde_json::json!({ "rows": rows, "command": command }))
+    let text = match &args.paraphrases {
+        Some(path) => std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
+        None => benchmark::PARAPHRASES.to_string(),
+    };
+    let paraphrases = benchmark::parse(&text).context("reading the paraphrase benchmark")?;
+    let hybrid = if args.calibrate { Hybrid::Calibrated } else { Hybrid::Fixed(args.weights.weights()) };
+    let report = retrieval::evaluate(&mut models, &test, hybrid, &paraphrases)?;
+    if let Some(calibration) = &report.calibration {
+        println!("{}", retrieval::calibration_markdown(calibration));
+    }
+    println!("hybrid weights: {:?}\n", report.hybrid);
+    println!("{}", retrieval::markdown(&report.rows));
+    if !report.unanswerable.is_empty() {
+        eprintln!("{} paraphrase queries have no relevant clip here and were left out", report.unanswerable.len());
+    }
+    c.write_json(&serde_json::json!({ "report": report, "command": command }))
 }

@@ -52,19 +52,28 @@ impl FilterArgs {
 #[derive(clap::Args, Clone)]
 pub struct WeightArgs {
     /// Weight of BM25 over captions, subject, path and joint labels.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = Weights::default().bm25)]
     bm25_weight: f32,
     /// Weight of sentence-embedding similarity to captions.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = Weights::default().captions)]
     caption_weight: f32,
     /// Weight of motion-embedding similarity (text or example against motions).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = Weights::default().motions)]
     motion_weight: f32,
+    /// BM25's weight is scaled by the share of the query's words the library holds, to this
+    /// power (0: not scaled).
+    #[arg(long, default_value_t = Weights::default().bm25_known_exponent)]
+    bm25_known_exponent: f32,
 }
 
 impl WeightArgs {
     pub fn weights(&self) -> Weights {
-        Weights { bm25: self.bm25_weight, captions: self.caption_weight, motions: self.motion_weight }
+        Weights {
+            bm25: self.bm25_weight,
+            captions: self.caption_weight,
+            motions: self.motion_weight,
+            bm25_known_exponent: self.bm25_known_exponent,
+        }
     }
 }
 
