@@ -310,6 +310,48 @@ fn rest_and_grpc_serve_every_capability() {
         assert_eq!(client.delete(&url).bearer_auth(KEY).send().await.unwrap().status(), 204);
         refused(client.get(&url).send().await.unwrap(), 404, "not_found", "no clip").await;
 
+        // The page that found the deleted clip is not served again: pages are kept by the
+        // store's clips as well as by the request.
+        let page: Value = get_json(&client, format!("{base}/v1/search?q=prances&limit=5")).await;
+        assert!(page["hits"].as_array().unwrap().iter().all(|h| h["id"] != new_id), "{page}");
+
+        // Queries sent at once are embedded together, and each gets its own answer.
+        let embedded = || async {
+            let metrics = client.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
+            metric(&metrics, "anymo_search_batch_texts_sum")
+        };
+        let before = embedded().await;
+        let asked = [
+            ("a horse jumps while galloping", "horse__gallop_jump"),
+            ("a horse kicks with its hind legs", "horse__attack_kick"),
+            ("a person bows angrily", "bow_angry"),
+            ("a person walks", "walk_normal"),
+            ("a husky dog eats", "husky__eating"),
+            ("a husky dog dies", "husky__death"),
+            ("a horse is hit from the left", "horse__idle_hitreact_left"),
+        ];
+        let pages = futures_join(
+            asked
+                .iter()
+                .map(|(q, _)| {
+                    let (client, url) =
+                        (client.clone(), format!("{base}/v1/search?q={}&limit=1", q.replace(' ', "%20")));
+                    async move { get_json(&client, url).await }
+                })
+                .collect(),
+        )
+        .await;
+        for ((q, word), page) in asked.iter().zip(&pages) {
+            let hit = &page["hits"][0];
+            assert!(hit["path"].as_str().unwrap().to_lowercase().contains(word), "{q:?} found {hit}");
+        }
+        assert_eq!(embedded().await - before, asked.len() as f64, "each new text embedded once");
+        // Asked again, the same queries are answered without embedding anything.
+        for (q, _) in &asked {
+            get_json(&client, format!("{base}/v1/search?q={}&limit=1", q.replace(' ', "%20"))).await;
+        }
+        assert_eq!(embedded().await - before, asked.len() as f64, "repeated texts are not embedded again");
+
         // Metrics count what was answered.
         let metrics = client.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
         assert!(
@@ -419,6 +461,12 @@ fn a_full_queue_answers_429_and_shutdown_finishes_in_flight_work() {
     });
     let status = server.child.wait().unwrap();
     assert!(status.success(), "the server exits 0 after a graceful shutdown: {status:?}");
+}
+
+/// The value of the metric line that starts with `name` in Prometheus' text.
+fn metric(metrics: &str, name: &str) -> f64 {
+    let line = metrics.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no {name} in:\n{metrics}"));
+    line.rsplit(' ').next().unwrap().parse().unwrap()
 }
 
 /// Awaits every future, keeping their order.

@@ -120,8 +120,8 @@ fn main() {
     let embedded: Vec<(String, Vec<f32>, Vec<f32>)> = QUERIES
         .iter()
         .map(|q| {
-            let (c, m) = models.text_vectors(q).expect("embedding a query");
-            (q.to_string(), c, m)
+            let v = models.text_vectors(q).expect("embedding a query");
+            (q.to_string(), v.caption, v.motion)
         })
         .collect();
     let embed_ms = started.elapsed().as_secs_f64() * 1000.0 / QUERIES.len() as f64;

@@ -80,7 +80,7 @@ fn some_text(text: String) -> Option<String> {
 impl Anymo for AnymoService {
     async fn health(&self, _: Request<proto::HealthRequest>) -> Result<Response<proto::HealthReply>, Status> {
         let (clips, _) = self.state.store.clips_signature().await.map_err(ApiError::from)?;
-        let searchable = self.state.search.run(self.state.limits.timeout, |w| Ok(w.searchable() as i64)).await?;
+        let searchable = self.state.search.searchable() as i64;
         Ok(Response::new(proto::HealthReply {
             status: "ok".into(),
             version: env!("CARGO_PKG_VERSION").into(),

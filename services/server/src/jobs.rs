@@ -3,9 +3,9 @@
 //! each clip in its own transaction and reports progress. A job whose process died resumes where
 //! its clips stopped: ingest skips what is already stored, so nothing committed is lost or doubled.
 
+use super::AppState;
 use super::error::ApiError;
-use super::search::SearchWorker;
-use super::{AppState, Engine};
+use super::search::SearchService;
 use anymo_store::ingest::{Item, Progress, ingest};
 use anymo_store::{Job, JobFile, Store};
 use anymo_tokenizer::text::CachedEncoder;
@@ -118,8 +118,8 @@ pub struct JobRunner {
     pub scratch: PathBuf,
     /// This replica's name in the jobs table.
     pub owner: String,
-    /// The search worker, told to sync after a job.
-    pub search: Engine<SearchWorker>,
+    /// Search, told to sync its index after a job.
+    pub search: Arc<SearchService>,
     /// Set while a job runs.
     pub busy: Arc<AtomicBool>,
     /// Set when the server stops: no new job is claimed.
@@ -175,11 +175,7 @@ impl JobRunner {
         if let Err(e) = finished {
             tracing::error!(job = job.id, "recording the end of the job: {e}");
         }
-        self.search.spawn(|worker: &mut SearchWorker| {
-            if let Err(e) = worker.refresh() {
-                tracing::error!("syncing the search index after a job: {}", e.message);
-            }
-        });
+        self.search.sync_soon();
         tracing::info!(job = job.id, "job ended");
     }
 

@@ -29,7 +29,7 @@ use generation::GenerationModels;
 use jobs::JobRunner;
 use limits::Limits;
 use metrics::Metrics;
-use search::SearchWorker;
+use search::SearchService;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::num::NonZeroUsize;
@@ -38,9 +38,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{SyncSender, sync_channel};
 use std::time::{Duration, Instant};
-
-/// Search requests that may wait for the search worker.
-const SEARCH_QUEUE: usize = 64;
 
 /// How the server is set up.
 #[derive(Clone, Debug)]
@@ -53,8 +50,9 @@ pub struct ServerConfig {
     pub database_url: Option<String>,
     /// The sentence encoder's folder.
     pub encoder_dir: PathBuf,
-    /// Distinct texts whose sentence embeddings each model worker keeps (least recently used
-    /// go first), so the cache stays bounded however many distinct prompts arrive.
+    /// Distinct texts whose sentence embeddings each model worker keeps, and whose vectors
+    /// search keeps (least recently used go first), so the caches stay bounded however many
+    /// distinct prompts and queries arrive.
     pub embedding_cache: NonZeroUsize,
     /// The checkpoints.
     pub checkpoints: Checkpoints,
@@ -80,8 +78,8 @@ pub struct AppState {
     pub store: Store,
     /// The generation workers.
     pub generation: Engine<GenerationModels>,
-    /// The search worker.
-    pub search: Engine<SearchWorker>,
+    /// Search: its models' thread, the shared index and the caches.
+    pub search: Arc<SearchService>,
     /// The limits.
     pub limits: Limits,
     /// The API keys.
@@ -142,17 +140,15 @@ impl Server {
             })
             .await??
         };
-        let search = Engine::start(
-            "search",
-            vec![SearchWorker::new(search_models, library, store.clone(), runtime.clone())],
-            SEARCH_QUEUE,
-        );
-        // The index catches up with the store before the first query asks it to.
-        search.spawn(|worker: &mut SearchWorker| {
-            if let Err(e) = worker.refresh() {
-                tracing::error!("syncing the search index at start: {}", e.message);
-            }
-        });
+        let metrics = Metrics::default();
+        let search = Arc::new(SearchService::start(
+            search_models,
+            library,
+            store.clone(),
+            runtime.clone(),
+            config.embedding_cache,
+            metrics.search_batch_texts(),
+        )?);
         tracing::info!(seconds = started.elapsed().as_secs_f64(), "models loaded");
 
         let (jobs, wake) = sync_channel(1);
@@ -176,7 +172,7 @@ impl Server {
             search,
             limits: config.limits.clone(),
             keys: config.keys.clone(),
-            metrics: Metrics::default(),
+            metrics,
             jobs,
         });
         let listener = tokio::net::TcpListener::bind(&config.addr)

@@ -1,5 +1,6 @@
 //! Prometheus metrics at `GET /metrics`: requests by route, method and status, their latency,
-//! what was generated, and how many requests wait for the model workers.
+//! what was generated, how many requests wait for the model workers, and how many query texts
+//! search embeds per batch.
 
 use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::metrics::counter::Counter;
@@ -37,6 +38,7 @@ pub struct Metrics {
     latency: Family<RouteLabels, Histogram>,
     generated: Family<KindLabels, Counter>,
     waiting: Family<QueueLabels, Gauge>,
+    search_batch_texts: Histogram,
 }
 
 impl Default for Metrics {
@@ -52,7 +54,13 @@ impl Default for Metrics {
         registry.register("motions_generated", "Motions made, by kind of request", generated.clone());
         let waiting = Family::<QueueLabels, Gauge>::default();
         registry.register("queue_waiting", "Requests waiting for a model worker, by queue", waiting.clone());
-        Metrics { registry, requests, latency, generated, waiting }
+        let search_batch_texts = Histogram::new(exponential_buckets(1.0, 2.0, 7));
+        registry.register(
+            "search_batch_texts",
+            "Query texts embedded together in one batch of the sentence encoder",
+            search_batch_texts.clone(),
+        );
+        Metrics { registry, requests, latency, generated, waiting, search_batch_texts }
     }
 }
 
@@ -62,6 +70,11 @@ impl Metrics {
         let labels = RequestLabels { route: route.to_string(), method: method.to_string(), status };
         self.requests.get_or_create(&labels).inc();
         self.latency.get_or_create(&RouteLabels { route: route.to_string() }).observe(seconds);
+    }
+
+    /// The histogram of texts per search embedding batch, for the search models' thread.
+    pub fn search_batch_texts(&self) -> Histogram {
+        self.search_batch_texts.clone()
     }
 
     /// Counts motions made by a kind of request.

@@ -134,12 +134,12 @@ impl IndexArgs {
             &self.checkpoints.set().get(&self.evaluator),
             CachedEncoder::new(store_args.encoder()?),
         )?;
-        let mut library = open_library(&store_args.data_dir()?, &models)?;
+        let library = std::sync::RwLock::new(open_library(&store_args.data_dir()?, &models)?);
         let bar = ProgressBar::hidden();
         bar.set_style(
             ProgressStyle::with_template("indexing {bar:40} {pos}/{len} clips eta {eta}").expect("a template"),
         );
-        let report = runtime.block_on(sync(store, &mut library, &mut models, &mut |done, pending| {
+        let report = runtime.block_on(sync(store, &library, &mut models, &mut |done, pending| {
             if bar.is_hidden() {
                 bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
                 bar.set_length(pending as u64);
@@ -147,6 +147,7 @@ impl IndexArgs {
             bar.set_position(done as u64);
         }))?;
         bar.finish_and_clear();
+        let library = library.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
         Ok(SyncedIndex { models, library, report })
     }
 }

@@ -56,8 +56,8 @@ pub struct Args {
     replica: Option<String>,
     #[command(flatten)]
     checkpoints: CheckpointArgs,
-    /// Distinct prompts and captions whose sentence embeddings each model worker keeps; the least
-    /// recently used go first.
+    /// Distinct prompts and captions whose sentence embeddings each model worker keeps, and
+    /// distinct search queries whose vectors search keeps; the least recently used go first.
     #[arg(long, default_value_t = DEFAULT_CACHE_TEXTS)]
     embedding_cache: NonZeroUsize,
     /// The generator checkpoint.

@@ -91,8 +91,13 @@ struct TextQuery {
 
 impl TextQuery {
     fn new(models: &mut SearchModels, text: &str, relevant: Vec<bool>) -> Result<TextQuery> {
-        let (caption_vector, motion_vector) = models.text_vectors(text)?;
-        Ok(TextQuery { text: text.to_string(), caption_vector, motion_vector, relevant })
+        let vectors = models.text_vectors(text)?;
+        Ok(TextQuery {
+            text: text.to_string(),
+            caption_vector: vectors.caption,
+            motion_vector: vectors.motion,
+            relevant,
+        })
     }
 
     /// The rank of the first relevant clip in `library` under `weights`.

@@ -18,6 +18,7 @@ use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::encode_whole;
 use anymo_tokenizer::text::CachedEncoder;
 use std::path::{Path, PathBuf};
+use std::sync::{PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 /// Clips indexed per commit while syncing.
 const BATCH: usize = 64;
@@ -82,10 +83,21 @@ impl SearchModels {
 
     /// A text's vectors: its sentence embedding (caption space) and the evaluator's projection of
     /// it (motion space).
-    pub fn text_vectors(&mut self, text: &str) -> Result<(Vec<f32>, Vec<f32>), ModelError> {
-        let sentence = self.encoder.encode(&[text])?.remove(0);
-        let motion = self.evaluator.embed_sentence(&sentence)?;
-        Ok((unit(sentence), unit(motion)))
+    pub fn text_vectors(&mut self, text: &str) -> Result<TextVectors, ModelError> {
+        Ok(self.texts_vectors(&[text])?.remove(0))
+    }
+
+    /// [`SearchModels::text_vectors`] of several texts, their sentence embeddings computed in one
+    /// batch of the encoder (a batch costs far less than its texts one at a time).
+    pub fn texts_vectors(&mut self, texts: &[&str]) -> Result<Vec<TextVectors>, ModelError> {
+        let sentences = self.encoder.encode(texts)?;
+        sentences
+            .into_iter()
+            .map(|sentence| {
+                let motion = self.evaluator.embed_sentence(&sentence)?;
+                Ok(TextVectors { caption: unit(sentence), motion: unit(motion) })
+            })
+            .collect()
     }
 
     /// A clip's motion embedding: cleaned and resampled as for the models, then
@@ -115,8 +127,7 @@ impl SearchModels {
         Ok(unit(sum))
     }
 
-    /// The library query for text and/or an example clip: BM25 and caption vectors from the
-    /// text; motion vector from the example when there is one, else from the text.
+    /// The library query for text and/or an example clip: see [`query`].
     pub fn query(
         &mut self,
         text: Option<&str>,
@@ -126,26 +137,9 @@ impl SearchModels {
         page: (usize, usize),
     ) -> Result<Query, ModelError> {
         let text = text.map(str::trim).filter(|t| !t.is_empty());
-        let (caption_vector, text_motion) = match text {
-            Some(t) => {
-                let (c, m) = self.text_vectors(t)?;
-                (Some(c), Some(m))
-            }
-            None => (None, None),
-        };
-        let motion_vector = match like {
-            Some(m) => Some(self.motion_vector(m)?),
-            None => text_motion,
-        };
-        Ok(Query {
-            text: text.map(String::from),
-            caption_vector,
-            motion_vector,
-            filter,
-            weights,
-            offset: page.0,
-            limit: page.1,
-        })
+        let vectors = text.map(|t| self.text_vectors(t)).transpose()?;
+        let example = like.map(|m| self.motion_vector(m)).transpose()?;
+        Ok(query(text, vectors, example, filter, weights, page))
     }
 
     /// The library entry of a stored clip, given its BVH text, and why it has no motion vector
@@ -179,6 +173,41 @@ impl SearchModels {
     }
 }
 
+/// A text's vectors in the library's two spaces, unit length.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextVectors {
+    /// The sentence embedding (caption space).
+    pub caption: Vec<f32>,
+    /// The evaluator's projection of it (motion space).
+    pub motion: Vec<f32>,
+}
+
+/// The library query for a text (with its vectors) and/or an example clip's motion vector:
+/// BM25 and caption vectors from the text; the motion vector from the example when there is
+/// one, else from the text.
+pub fn query(
+    text: Option<&str>,
+    vectors: Option<TextVectors>,
+    example: Option<Vec<f32>>,
+    filter: Filter,
+    weights: Weights,
+    page: (usize, usize),
+) -> Query {
+    let (caption_vector, text_motion) = match vectors {
+        Some(v) => (Some(v.caption), Some(v.motion)),
+        None => (None, None),
+    };
+    Query {
+        text: text.map(String::from),
+        caption_vector,
+        motion_vector: example.or(text_motion),
+        filter,
+        weights,
+        offset: page.0,
+        limit: page.1,
+    }
+}
+
 /// What a sync changed.
 #[derive(Debug, Default, PartialEq)]
 pub struct SyncReport {
@@ -193,20 +222,24 @@ pub struct SyncReport {
 
 /// Brings `library` up to date with `store`: indexes stored clips it lacks or holds without
 /// their vectors, and removes clips the store no longer has. Commits every [`BATCH`] clips, so
-/// an interrupted sync keeps what it did. `progress(done, pending)` is called after each batch.
+/// an interrupted sync keeps what it did; the library is locked for writing only while a batch
+/// goes in, so searches go on while a long sync embeds. `progress(done, pending)` is called
+/// after each batch.
 pub async fn sync(
     store: &Store,
-    library: &mut Library,
+    library: &RwLock<Library>,
     models: &mut SearchModels,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SyncReport> {
     let stored = store.clip_ids().await?;
     let stored_set: std::collections::HashSet<u64> = stored.iter().map(|&id| id as u64).collect();
-    let gone: Vec<u64> = library.ids().into_iter().filter(|id| !stored_set.contains(id)).collect();
-    library.remove(&gone)?;
-    let incomplete: std::collections::HashSet<u64> = library.incomplete().into_iter().collect();
-    let pending: Vec<i64> =
-        stored.into_iter().filter(|&id| !library.contains(id as u64) || incomplete.contains(&(id as u64))).collect();
+    let gone: Vec<u64> = read(library).ids().into_iter().filter(|id| !stored_set.contains(id)).collect();
+    write(library).remove(&gone)?;
+    let pending: Vec<i64> = {
+        let library = read(library);
+        let incomplete: std::collections::HashSet<u64> = library.incomplete().into_iter().collect();
+        stored.into_iter().filter(|&id| !library.contains(id as u64) || incomplete.contains(&(id as u64))).collect()
+    };
     let mut report = SyncReport { indexed: pending.len(), removed: gone.len(), without_motion: Vec::new() };
     let mut done = 0;
     for batch in pending.chunks(BATCH) {
@@ -219,11 +252,22 @@ pub async fn sync(
             report.without_motion.extend(problem);
             entries.push(entry);
         }
-        library.upsert(entries)?;
+        write(library).upsert(entries)?;
         done += batch.len();
         progress(done, pending.len());
     }
     Ok(report)
+}
+
+/// The library for reading. A holder that panicked left it as its last commit did, so the
+/// lock's poisoning is not an error here.
+pub fn read(library: &RwLock<Library>) -> RwLockReadGuard<'_, Library> {
+    library.read().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The library for writing (see [`read`] on poisoning).
+pub fn write(library: &RwLock<Library>) -> RwLockWriteGuard<'_, Library> {
+    library.write().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// Opens the library of a data directory for `models`, ready to sync.

@@ -22,7 +22,7 @@ pub struct Health {
     pub generation_running: usize,
     /// Requests waiting for a generation worker.
     pub generation_waiting: usize,
-    /// Requests waiting for the search worker.
+    /// Search jobs waiting for the search models' thread.
     pub search_waiting: usize,
     /// What one request may ask (so a client can offer only what will be accepted).
     pub limits: LimitsView,
