@@ -37,7 +37,7 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     let ck = dir.join("ck");
     std::fs::create_dir_all(&ck).unwrap();
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints");
-    for file in ["owo.safetensors", "owo.json", "tat.safetensors", "tat.json"] {
+    for file in ["owo.safetensors", "owo.json", "tat-v2.safetensors", "tat-v2.json"] {
         std::fs::copy(shipped.join(file), ck.join(file)).unwrap();
     }
     let manifest = shared.join("manifest.tsv").to_string_lossy().into_owned();
@@ -181,7 +181,7 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     assert_eq!(f, 150);
 
     // A tokenizer retrained under the generator's tokenizer's name is refused, not decoded with.
-    let weights = ck.join("tat.safetensors");
+    let weights = ck.join("tat-v2.safetensors");
     let mut bytes = std::fs::read(&weights).unwrap();
     *bytes.last_mut().unwrap() ^= 1;
     std::fs::write(&weights, bytes).unwrap();
@@ -189,7 +189,7 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     assert!(!stale.status.success());
     let error = String::from_utf8_lossy(&stale.stderr);
     assert!(
-        error.contains("straight was trained on other tat weights") && error.contains("anymo train generator"),
+        error.contains("straight was trained on other tat-v2 weights") && error.contains("anymo train generator"),
         "{error}"
     );
 }

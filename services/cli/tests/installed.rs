@@ -50,6 +50,6 @@ fn a_copied_binary_runs_from_any_folder() {
     let refused = installed(&binary, &work, &["tokenize", "walk.bvh", "-o", "again.json"]);
     assert!(!refused.status.success());
     let err = String::from_utf8_lossy(&refused.stderr);
-    assert!(err.contains("checkpoint tat not found in") && err.contains("bin/checkpoints"), "{err}");
+    assert!(err.contains("checkpoint tat-v2 not found in") && err.contains("bin/checkpoints"), "{err}");
     std::fs::remove_dir_all(&root).unwrap();
 }

@@ -223,7 +223,7 @@ fn rest_and_grpc_serve_every_capability() {
         let body = serde_json::json!({ "clip_id": walk_id });
         let tokens: Value =
             client.post(format!("{base}/v1/tokenize")).json(&body).send().await.unwrap().json().await.unwrap();
-        assert_eq!(tokens["model"], "tat");
+        assert_eq!(tokens["model"], "tat-v2");
         assert_eq!(tokens["tokens"]["frames"].as_u64().unwrap() as usize, frames(&husky));
         let body = serde_json::json!({ "tokens": tokens, "skeleton_id": horse_id });
         let response = client.post(format!("{base}/v1/detokenize")).json(&body).send().await.unwrap();

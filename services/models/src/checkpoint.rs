@@ -13,6 +13,11 @@ use std::collections::HashMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+/// The tokenizer that tokens, transfer and search use, and that new evaluators and generators
+/// are trained on, unless told otherwise: tokenizer v2, which reads every skeleton against a
+/// reference pose (`tat`, v1, still ships and is chosen by name).
+pub const DEFAULT_TOKENIZER: &str = "tat-v2";
+
 /// A checkpoint compiled into a binary: its name, model card text and safetensors bytes.
 #[derive(Debug)]
 pub struct BuiltIn {

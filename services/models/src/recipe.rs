@@ -165,6 +165,8 @@ pub struct TokenizerRecipe {
     pub weights: Vec<(String, f32)>,
     /// Probability of rebasing a window on the pose of one of its frames (NEC C.1).
     pub rebase: f64,
+    /// Probability of rebasing a window on a frame of any clip of its skeleton.
+    pub rebase_other: f64,
     /// The joint frames the codec reads motion in.
     pub representation: Representation,
     /// Batches per step, each of one skeleton.
@@ -263,6 +265,7 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
         window: 64,
         max_batch_joints: 16 * 24,
         rebase: recipe.rebase,
+        rebase_other: recipe.rebase_other,
         save_every_seconds: run.save_every.as_secs(),
     };
     let mut graph_of = |s: &Skeleton| -> Result<SkeletonGraph> { Ok(SkeletonGraph::new(s, encoder)?) };

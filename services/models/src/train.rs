@@ -174,6 +174,10 @@ pub struct CodecTraining {
     /// with 0.5).
     #[serde(default = "default_rebase")]
     pub rebase: f64,
+    /// Probability of rebasing a window on a frame of any clip of its skeleton (cards that do
+    /// not record it were trained without).
+    #[serde(default)]
+    pub rebase_other: f64,
 }
 
 fn one() -> usize {
@@ -240,6 +244,7 @@ pub fn train_codec(
         max_batch_joints: settings.max_batch_joints,
         seed: settings.seed,
         rebase: settings.rebase,
+        rebase_other: settings.rebase_other,
         ..LoaderConfig::default()
     };
     let loader = WindowLoader::new(clips, config);

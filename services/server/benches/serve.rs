@@ -122,7 +122,7 @@ fn main() -> anyhow::Result<()> {
             embedding_cache: anymo_tokenizer::text::DEFAULT_CACHE_TEXTS,
             checkpoints: Checkpoints::Dir(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints")),
             generator: "generator".into(),
-            tokenizer: "tat".into(),
+            tokenizer: anymo_models::checkpoint::DEFAULT_TOKENIZER.into(),
             evaluator: "evaluator".into(),
             limits: Limits { queue: 64, ..Limits::default() },
             keys: Default::default(),

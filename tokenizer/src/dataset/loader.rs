@@ -36,6 +36,11 @@ pub struct LoaderConfig {
     /// Probability of rebasing a window on the pose of one of its frames (NEC C.1): the same
     /// motion written on another reference pose, as a user's file may give one.
     pub rebase: f64,
+    /// Probability of rebasing a window on a frame of any clip of its skeleton (after the
+    /// rebasing above): the same motion against a reference pose taken from other motion, as the
+    /// reference of a rig seen only through a user's few files is. 0 draws nothing, so runs
+    /// from before it existed sample as they did.
+    pub rebase_other: f64,
     /// Bone lengths are scaled by factors drawn from `[1 - s, 1 + s]` (0 turns it off).
     pub bone_scale: f32,
     /// At most this many joints over all windows of a batch, so batches of large skeletons
@@ -53,6 +58,7 @@ impl Default for LoaderConfig {
             seed: 0,
             mirror: 0.5,
             rebase: 0.1,
+            rebase_other: 0.0,
             bone_scale: 0.1,
             max_batch_joints: 512,
         }
@@ -178,7 +184,7 @@ impl WindowLoader {
             (Vec::with_capacity(b * t * ROOT_DIMS), Vec::with_capacity(b * t * j * ROT_DIMS));
         let mut offsets = Vec::with_capacity(b * j * 3);
         for &(clip, start) in &windows {
-            let motion = self.augment(self.clips[clip].slice(start, t), rng);
+            let motion = self.augment(group, self.clips[clip].slice(start, t), rng);
             let (features, _) = to_features(&canonicalise(&motion));
             root.extend_from_slice(&features.root);
             rotations.extend_from_slice(&features.rotations);
@@ -196,7 +202,8 @@ impl WindowLoader {
         })
     }
 
-    fn augment(&self, mut motion: Motion, rng: &mut ChaCha8Rng) -> Motion {
+    /// A window of a clip of skeleton group `group`, augmented as the configuration says.
+    fn augment(&self, group: usize, mut motion: Motion, rng: &mut ChaCha8Rng) -> Motion {
         if rng.random_bool(self.config.mirror)
             && let Ok(mirrored) = mirror(&motion)
         {
@@ -205,6 +212,12 @@ impl WindowLoader {
         if rng.random_bool(self.config.rebase) {
             let base = rng.random_range(0..motion.frames());
             motion = ReferencePose::of_frame(&motion, base).rebase(&motion);
+        }
+        if self.config.rebase_other > 0.0 && rng.random_bool(self.config.rebase_other) {
+            let members = &self.groups[group];
+            let other = &self.clips[members[rng.random_range(0..members.len())]];
+            let base = rng.random_range(0..other.frames());
+            motion = ReferencePose::of_frame(other, base).rebase(&motion);
         }
         if self.config.bone_scale > 0.0 {
             let s = self.config.bone_scale;
@@ -307,6 +320,35 @@ mod tests {
         for (got, want) in share.iter().zip([1.0 / 3.0; 3]) {
             assert!((got - want).abs() < 0.03, "{share:?}");
         }
+    }
+
+    #[test]
+    fn rebasing_on_another_clip_turns_the_joint_frames_and_keeps_the_bones() {
+        let clips = || vec![from("a", clip("Leg", 90)), from("a", clip("Leg", 64))];
+        let plain = LoaderConfig {
+            window: 24,
+            batch_size: 4,
+            mirror: 0.0,
+            rebase: 0.0,
+            bone_scale: 0.0,
+            ..LoaderConfig::default()
+        };
+        let draw = |config: LoaderConfig| WindowLoader::new(clips(), config).step(0).unwrap().remove(0);
+        let (kept, rebased) = (draw(plain.clone()), draw(LoaderConfig { rebase_other: 1.0, ..plain }));
+        assert_eq!(kept.sources, rebased.sources, "the same windows");
+        let bones = |b: &Batch| b.offsets.to_vec3::<f32>().unwrap();
+        let (before, after) = (bones(&kept), bones(&rebased));
+        let length = |v: &[f32]| v.iter().map(|x| x * x).sum::<f32>().sqrt();
+        let mut turned = 0;
+        for (window_before, window_after) in before.iter().zip(&after) {
+            for (a, b) in window_before.iter().zip(window_after) {
+                assert!((length(a) - length(b)).abs() < 1e-5, "a bone keeps its length: {a:?} {b:?}");
+                turned += usize::from(a.iter().zip(b).any(|(x, y)| (x - y).abs() > 1e-3));
+            }
+        }
+        assert!(turned > 0, "some bone points another way in the other clip's reference");
+        let rotations = |b: &Batch| b.rotations.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_ne!(rotations(&kept), rotations(&rebased));
     }
 
     #[test]

@@ -9,9 +9,10 @@ use anyhow::{Context, Result};
 use anymo_models::checkpoint::Checkpoint;
 use anymo_models::data::ModelClip;
 use anymo_models::eval::retrieval::Hybrid;
-use anymo_models::eval::{self, generator, retrieval, tokenizer};
+use anymo_models::eval::{self, by_example, generator, retrieval, tokenizer};
 use anymo_models::search::SearchModels;
 use anymo_retrieval::benchmark;
+use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -29,7 +30,7 @@ enum What {
     /// Text-to-motion on the test split by MoMask's protocol, GT row beside the generators.
     Generator(GeneratorArgs),
     /// Search on the test split: held-out captions, paraphrases and motion by example, per
-    /// retriever.
+    /// retriever; then motion by example across skeletons, the whole corpus as the gallery.
     Retrieval(RetrievalArgs),
 }
 
@@ -185,8 +186,9 @@ fn run_generator(args: GeneratorArgs, command: &str) -> Result<()> {
 
 fn run_retrieval(args: RetrievalArgs, command: &str) -> Result<()> {
     let c = &args.common;
-    let clips = eval::test_clips(&c.manifest, c.limit)?;
-    let test: Vec<&ModelClip> = clips.iter().collect();
+    let (clips, rejected) = eval::clips(&c.manifest, c.limit)?;
+    let test: Vec<&ModelClip> = clips.iter().filter(|c| c.split == Split::Test).collect();
+    eprintln!("{} clips, {} of them test clips ({rejected} rejected by cleaning)", clips.len(), test.len());
     let evaluator: Checkpoint = checkpoints(c.dir.as_deref()).get(&args.evaluator);
     let mut models = SearchModels::load(&evaluator, CachedEncoder::new(c.store.encoder()?))?;
     let text = match &args.paraphrases {
@@ -204,5 +206,9 @@ fn run_retrieval(args: RetrievalArgs, command: &str) -> Result<()> {
     if !report.unanswerable.is_empty() {
         eprintln!("{} paraphrase queries have no relevant clip here and were left out", report.unanswerable.len());
     }
-    c.write_json(&serde_json::json!({ "report": report, "command": command }))
+    let all: Vec<&ModelClip> = clips.iter().collect();
+    let across = by_example::evaluate(&mut models, &all)?;
+    println!("motion by example across skeletons (the query's own rig left out of the gallery)\n");
+    println!("{}", by_example::markdown(&across));
+    c.write_json(&serde_json::json!({ "report": report, "across_skeletons": across, "command": command }))
 }

@@ -3,6 +3,7 @@
 
 use super::context::{CheckpointArgs, StoreArgs};
 use anyhow::{Context, Result};
+use anymo_models::checkpoint::DEFAULT_TOKENIZER;
 use anymo_server::auth::ApiKeys;
 use anymo_server::limits::Limits;
 use anymo_server::{Server, ServerConfig};
@@ -64,7 +65,7 @@ pub struct Args {
     #[arg(long, default_value = "generator")]
     generator: String,
     /// The tokenizer checkpoint for tokens and transfer.
-    #[arg(long, default_value = "tat")]
+    #[arg(long, default_value = DEFAULT_TOKENIZER)]
     tokenizer: String,
     /// The evaluator checkpoint that embeds motion for search.
     #[arg(long, default_value = "evaluator")]

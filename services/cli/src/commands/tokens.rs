@@ -5,6 +5,7 @@
 use super::context::{CheckpointArgs, StoreArgs};
 use super::input;
 use anyhow::{Context, Result};
+use anymo_models::checkpoint::DEFAULT_TOKENIZER;
 use anymo_models::tokens::{TokenCodec, TokenFile};
 use anymo_motion::bvh;
 use anymo_motion::motion::Motion;
@@ -19,7 +20,7 @@ pub struct ModelArgs {
     #[command(flatten)]
     checkpoints: CheckpointArgs,
     /// The tokenizer checkpoint.
-    #[arg(long, default_value = "tat")]
+    #[arg(long, default_value = DEFAULT_TOKENIZER)]
     model: String,
     #[command(flatten)]
     store: StoreArgs,

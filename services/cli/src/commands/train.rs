@@ -5,6 +5,7 @@
 use super::context::{StoreArgs, writable_checkpoints};
 use anyhow::Result;
 use anymo_generator::generate::Kind;
+use anymo_models::checkpoint::DEFAULT_TOKENIZER;
 use anymo_models::recipe::{self, EvaluatorRecipe, GeneratorRecipe, Run, TokenizerRecipe};
 use anymo_tokenizer::dataset::LoaderConfig;
 use anymo_tokenizer::tat::Representation;
@@ -36,7 +37,7 @@ struct EvaluatorArgs {
     #[command(flatten)]
     common: Common,
     /// The tokenizer checkpoint whose latents the evaluator reads.
-    #[arg(long, default_value = "tat")]
+    #[arg(long, default_value = DEFAULT_TOKENIZER)]
     tokenizer: String,
     /// Optimiser steps.
     #[arg(long, default_value_t = 2000)]
@@ -62,7 +63,7 @@ struct GeneratorArgs {
     #[command(flatten)]
     common: Common,
     /// The tokenizer checkpoint whose tokens the generator writes.
-    #[arg(long, default_value = "tat")]
+    #[arg(long, default_value = DEFAULT_TOKENIZER)]
     tokenizer: String,
     /// The first-layer model.
     #[arg(long, value_enum, default_value = "masked")]
@@ -168,6 +169,10 @@ struct TokenizerArgs {
     /// Probability of rebasing a window on the pose of one of its frames (NEC C.1).
     #[arg(long, default_value_t = LoaderConfig::default().rebase)]
     rebase: f64,
+    /// Probability of rebasing a window on a frame of any clip of its skeleton: motion read
+    /// against a reference pose taken from other motion, as on a rig known from a few files.
+    #[arg(long, default_value_t = LoaderConfig::default().rebase_other)]
+    rebase_other: f64,
     /// The joint frames the codec reads motion in: `reference` (frames world-aligned at each
     /// skeleton's mean pose, facing +Z: no rig convention shows) or `rest` (each rig's own
     /// frames and BVH rest pose, as tokenizer v1).
@@ -202,6 +207,7 @@ pub fn run(args: Args) -> Result<()> {
                 continue_shipped: a.continue_shipped,
                 weights: a.weights,
                 rebase: a.rebase,
+                rebase_other: a.rebase_other,
                 representation: a.representation,
                 skeletons_per_step: a.skeletons_per_step,
             };

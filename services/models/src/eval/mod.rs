@@ -1,9 +1,11 @@
 //! The evaluations of `../shared/docs/EVAL.md`, each a report with its Markdown tables and its
 //! figures as JSON: the tokenizers' reconstruction and transfer ([`tokenizer`]), text to motion
-//! ([`generator`]) and search ([`retrieval`]). The metrics themselves are the domain crates'
+//! ([`generator`]), search ([`retrieval`]) and motion by example across skeletons
+//! ([`by_example`]). The metrics themselves are the domain crates'
 //! (`anymo_motion::metrics`, `anymo_generator::evaluator`, `anymo_retrieval::metrics`); these
 //! modules are the protocols that choose the clips, run the models and tabulate.
 
+pub mod by_example;
 pub mod generator;
 pub mod retrieval;
 pub mod tokenizer;

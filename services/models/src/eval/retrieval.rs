@@ -45,26 +45,26 @@ fn text_retrievers(hybrid: Weights) -> [(&'static str, Weights); 5] {
 }
 
 /// A named group of query clips.
-type Subset = (&'static str, fn(&ModelClip) -> bool);
+pub(super) type Subset = (&'static str, fn(&ModelClip) -> bool);
 
 fn same_text(a: &str, b: &str) -> bool {
     a.trim().eq_ignore_ascii_case(b.trim())
 }
 
-/// Rank (1-based) of the first result `relevant` accepts, not counting `skip`; the gallery size
-/// when there is none (an unfound clip counts as last).
-fn first_relevant(
+/// Rank (1-based) of the first result `relevant` accepts, not counting those `skip` accepts;
+/// the number of results counted when there is none (an unfound clip counts as last).
+pub(super) fn first_relevant(
     library: &Library,
     query: &Query,
     relevant: &dyn Fn(u64) -> bool,
-    skip: Option<u64>,
+    skip: &dyn Fn(u64) -> bool,
 ) -> Result<usize> {
     let mut rank = 0;
     let mut offset = 0;
     while offset + MAX_LIMIT <= anymo_retrieval::library::MAX_DEPTH {
         let page = library.search(&Query { offset, limit: MAX_LIMIT, ..query.clone() })?;
         for hit in &page.hits {
-            if Some(hit.document.id) == skip {
+            if skip(hit.document.id) {
                 continue;
             }
             rank += 1;
@@ -77,7 +77,7 @@ fn first_relevant(
         }
         offset += MAX_LIMIT;
     }
-    Ok(library.len() - usize::from(skip.is_some()))
+    Ok((0..library.len()).filter(|&i| !skip(doc_id(i))).count())
 }
 
 /// A text query with its vectors, embedded once and searched under several weightings.
@@ -109,30 +109,30 @@ impl TextQuery {
             weights,
             ..Query::default()
         };
-        first_relevant(library, &query, &|doc| self.relevant[doc_index(doc)], None)
+        first_relevant(library, &query, &|doc| self.relevant[doc_index(doc)], &|_| false)
     }
 }
 
 /// Gallery clip `i`'s document id.
-fn doc_id(i: usize) -> u64 {
+pub(super) fn doc_id(i: usize) -> u64 {
     i as u64 + 1
 }
 
 /// The gallery index of document `id`.
-fn doc_index(id: u64) -> usize {
+pub(super) fn doc_index(id: u64) -> usize {
     (id - 1) as usize
 }
 
 /// A gallery clip's vectors and document, computed once for both libraries.
-struct Embedded {
-    document: ClipDocument,
+pub(super) struct Embedded {
+    pub(super) document: ClipDocument,
     caption_embeddings: Vec<Vec<f32>>,
-    motion_vector: Vec<f32>,
+    pub(super) motion_vector: Vec<f32>,
 }
 
 impl Embedded {
     /// The library entry indexing the clip with its first `captions` captions.
-    fn entry(&self, captions: usize) -> Entry {
+    pub(super) fn entry(&self, captions: usize) -> Entry {
         Entry {
             document: ClipDocument { captions: self.document.captions[..captions].to_vec(), ..self.document.clone() },
             caption_vector: caption_vector(&self.caption_embeddings[..captions]),
@@ -141,7 +141,7 @@ impl Embedded {
     }
 }
 
-fn embed(models: &mut SearchModels, clips: &[&ModelClip]) -> Result<Vec<Embedded>> {
+pub(super) fn embed(models: &mut SearchModels, clips: &[&ModelClip]) -> Result<Vec<Embedded>> {
     clips
         .iter()
         .enumerate()
@@ -167,7 +167,7 @@ fn embed(models: &mut SearchModels, clips: &[&ModelClip]) -> Result<Vec<Embedded
         .collect()
 }
 
-fn library_of(models: &SearchModels, entries: Vec<Entry>) -> Result<Library> {
+pub(super) fn library_of(models: &SearchModels, entries: Vec<Entry>) -> Result<Library> {
     let mut library = Library::in_memory(models.spaces().clone());
     library.upsert(entries)?;
     Ok(library)
@@ -315,8 +315,9 @@ pub fn evaluate(
             weights: Weights::new(0.0, 0.0, 1.0),
             ..Query::default()
         };
-        example_ranks
-            .push(has_partner.then(|| first_relevant(&held_out, &query, &shares, Some(doc_id(i)))).transpose()?);
+        example_ranks.push(
+            has_partner.then(|| first_relevant(&held_out, &query, &shares, &|doc| doc == doc_id(i))).transpose()?,
+        );
     }
 
     let subsets: [Subset; 3] =
@@ -363,23 +364,27 @@ pub fn evaluate(
     Ok(RetrievalReport { rows, hybrid, calibration, unanswerable })
 }
 
+/// The rank columns every search table ends with.
+pub(super) const RANK_HEADERS: [&str; 5] = ["R@1", "R@5", "R@10", "MRR", "median rank"];
+
+/// A summary's cells under [`RANK_HEADERS`].
+pub(super) fn rank_cells(s: &RankSummary) -> [String; 5] {
+    [
+        format!("{:.3}", s.r1),
+        format!("{:.3}", s.r5),
+        format!("{:.3}", s.r10),
+        format!("{:.3}", s.mrr),
+        s.median_rank.to_string(),
+    ]
+}
+
 /// The rows as a Markdown table.
 pub fn markdown(rows: &[RetrievalRow]) -> String {
-    let mut table =
-        Table::new(&["task", "retrievers", "queries", "queries' subset", "R@1", "R@5", "R@10", "MRR", "median rank"]);
+    let mut table = Table::new(&[&["task", "retrievers", "queries", "queries' subset"][..], &RANK_HEADERS].concat());
     for r in rows {
         let s = &r.summary;
-        table.row(&[
-            r.task.to_string(),
-            r.retrievers.to_string(),
-            s.queries.to_string(),
-            r.subset.to_string(),
-            format!("{:.3}", s.r1),
-            format!("{:.3}", s.r5),
-            format!("{:.3}", s.r10),
-            format!("{:.3}", s.mrr),
-            s.median_rank.to_string(),
-        ]);
+        let cells = [r.task.to_string(), r.retrievers.to_string(), s.queries.to_string(), r.subset.to_string()];
+        table.row(&[&cells[..], &rank_cells(s)].concat());
     }
     table.into_text()
 }

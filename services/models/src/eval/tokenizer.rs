@@ -3,7 +3,8 @@
 //! beside two references that are no model (each clip held in its mean pose, and in its rig's
 //! rest pose); each model against the mean-pose reference source by source; the same clips on
 //! rigs whose joint frames are turned (the world motion unchanged), which a tokenizer should not
-//! tell apart; and zero-shot transfer (cycle consistency, foot skating and ground penetration of
+//! tell apart; for a codec on the reference pose, the same clips read against their own mean
+//! pose (a diagnosis of how much error the held-out reference pose brings); and zero-shot transfer (cycle consistency, foot skating and ground penetration of
 //! transfers, and NEC appendix F's correlation of pairwise motion distances before and after).
 
 use super::{Table, f};
@@ -276,6 +277,14 @@ pub fn held_bases(representation: Representation, all: &[&ModelClip], measured: 
         .collect()
 }
 
+/// Each clip's basis from the clip itself (its own mean pose): a diagnosis, never a headline
+/// figure. Against the held-out bases of [`held_bases`] it tells how much of a codec's error on
+/// a rig comes from the reference pose differing from the clip's own, and how much from the
+/// codec.
+pub fn own_clip_bases(measured: &[&ModelClip]) -> Vec<Basis> {
+    measured.iter().map(|clip| Basis::of(Representation::Reference, clip.motion.skeleton(), [&clip.motion])).collect()
+}
+
 /// A clip held still: every joint but the root keeps its mean local rotation over the clip, and
 /// the root moves as it does in the clip. A reference for the table: a tokenizer that keeps no
 /// motion but the root's would score this.
@@ -541,6 +550,12 @@ pub fn evaluate_tokenizers(
         let own =
             self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, bases(representation), window, overlap)?;
         reconstruction.push((name.clone(), tables.add(name, &own)?));
+        if representation == Representation::Reference {
+            let own_bases = own_clip_bases(&eval_clips);
+            let rebuilt = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, &own_bases, window, overlap)?;
+            let label = format!("{name} (own-clip reference)");
+            reconstruction.push((label.clone(), tables.add(&label, &rebuilt)?));
+        }
         if invariance {
             let on = turned_bases(representation);
             let turned = self::reconstruction(codec.as_mut(), &mut graphs, &turned_refs, on, window, overlap)?;
