@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-/// The tokenizer that tokens, transfer and search use, and that new evaluators and generators
+/// The tokenizer that tokens and transfer use, and that new evaluators and generators
 /// are trained on, unless told otherwise: tokenizer v2, which reads every skeleton against a
 /// reference pose (`tat`, v1, still ships and is chosen by name).
 pub const DEFAULT_TOKENIZER: &str = "tat-v2";

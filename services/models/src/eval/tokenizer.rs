@@ -4,8 +4,9 @@
 //! rest pose); each model against the mean-pose reference source by source; the same clips on
 //! rigs whose joint frames are turned (the world motion unchanged), which a tokenizer should not
 //! tell apart; for a codec on the reference pose, the same clips read against their own mean
-//! pose (a diagnosis of how much error the held-out reference pose brings); and zero-shot transfer (cycle consistency, foot skating and ground penetration of
-//! transfers, and NEC appendix F's correlation of pairwise motion distances before and after).
+//! pose (a diagnosis of how much error the held-out reference pose brings); and zero-shot
+//! transfer (cycle consistency, foot skating and ground penetration of transfers, and NEC
+//! appendix F's correlation of pairwise motion distances before and after).
 
 use super::{Table, f};
 use crate::card::CodecCard;
