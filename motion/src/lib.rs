@@ -5,7 +5,9 @@
 //! [`features`] maps motion to the models' per-joint features and exactly back; [`reference`]
 //! rebases motion onto a reference pose so no rig convention shows in it; [`prep`] cleans
 //! and normalises clips for training without touching what users get back; [`metrics`] measures
-//! reconstruction and transfer.
+//! reconstruction and transfer. [`contact`] finds any rig's feet and their ground contacts,
+//! [`ik`] places a leg, [`cleanup`] smooths decoded motion and plants its feet, [`posture`]
+//! stands a rest pose up, and [`quality`] states how plausible a motion is.
 //!
 //! ```
 //! use anymo_motion::{bvh, kinematics, motion::Motion};
@@ -19,12 +21,17 @@
 //! ```
 
 pub mod bvh;
+pub mod cleanup;
+pub mod contact;
 pub mod features;
 pub mod gltf;
+pub mod ik;
 pub mod kinematics;
 pub mod metrics;
 pub mod motion;
+pub mod posture;
 pub mod prep;
+pub mod quality;
 pub mod reference;
 pub mod rotation;
 pub mod skeleton;

@@ -199,14 +199,7 @@ mod tests {
 
     #[test]
     fn joint_kinds_follow_what_each_rotation_moves() {
-        use crate::skeleton::{Channels, EulerOrder, Joint};
-        let joint = |name: &str, parent: Option<usize>, offset: Vec3| Joint {
-            name: name.into(),
-            parent,
-            offset,
-            channels: Channels::rotation(EulerOrder::Zyx),
-            end_site: None,
-        };
+        use crate::skeleton::rotating_joint as joint;
         // hips -> pelvis (zero offset) -> thigh -> foot (leaf with an end site);
         // hips -> marker (zero offset, leaf).
         let mut joints = vec![

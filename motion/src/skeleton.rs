@@ -428,6 +428,12 @@ impl Skeleton {
     }
 }
 
+/// A joint with three rotation channels and no end site, for tests that build skeletons.
+#[cfg(test)]
+pub(crate) fn rotating_joint(name: &str, parent: Option<usize>, offset: Vec3) -> Joint {
+    Joint { name: name.into(), parent, offset, channels: Channels::rotation(EulerOrder::Zyx), end_site: None }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -26,6 +26,7 @@ const OWN: &[&str] = &[
     "generate.js",
     "library.js",
     "transfer.js",
+    "quality.js",
 ];
 
 /// What is taken from the npm package `three`: (path in the package, name under `/ui/vendor/`).

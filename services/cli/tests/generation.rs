@@ -193,3 +193,73 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
         "{error}"
     );
 }
+
+/// The quality report `anymo generate` prints for its one sample.
+fn report(output: &Output) -> serde_json::Value {
+    let line = String::from_utf8_lossy(&output.stdout).lines().last().expect("a report line").to_string();
+    serde_json::from_str::<serde_json::Value>(&line).expect("a JSON report")["quality"].clone()
+}
+
+#[test]
+fn shipped_generation_stands_plants_its_feet_and_says_how_good_it_is() {
+    let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
+    let dir = scratch_dir("generation-quality");
+    let unzip = |path: &str, name: &str| {
+        let out = dir.join(name);
+        gunzip(&shared.join(path), &out);
+        out
+    };
+    // A clip of a rig whose rest pose is no pose (every bone along one axis): the motion is
+    // written around the clip's mean pose.
+    let walk = unzip("bandai/dataset-1/dataset-1_walk_normal_001.bvh.gz", "walk.bvh");
+    let generate = |skeleton: &Path, prompt: &str, out: &str, more: &[&str]| -> (Output, PathBuf) {
+        let out = dir.join(out);
+        let mut a = args(&["generate", prompt, "--skeleton", &skeleton.to_string_lossy(), "--seconds", "4"]);
+        a.extend(args(&["--seed", "1", "-o", &out.to_string_lossy()]));
+        a.extend(args(more));
+        (ok(anymo(&models, &a).env_remove("ANYMO_CHECKPOINTS").output().unwrap()), out)
+    };
+
+    let (made, out) = generate(&walk, "a person walks forward", "generated.bvh", &[]);
+    // It stands: in every frame the head is above the hips, the hips above the toes, and the
+    // spine points up.
+    let motion = anymo_motion::motion::Motion::from_bvh(&bvh::read_path(&out, ReadOptions::default()).unwrap());
+    let skeleton = motion.skeleton();
+    let [head, hips, toes] = ["Head", "Hips", "Toes_L"].map(|n| skeleton.find(n).unwrap());
+    for f in 0..motion.frames() {
+        let p = anymo_motion::kinematics::joint_positions(&motion, f);
+        assert!(
+            p[head].y > p[hips].y && p[hips].y > p[toes].y,
+            "frame {f}: head {} hips {} toes {}",
+            p[head],
+            p[hips],
+            p[toes]
+        );
+        assert!((p[head] - p[hips]).normalize().y > 0.7, "frame {f}: the spine leans {}", p[head] - p[hips]);
+    }
+    let clean = report(&made);
+    assert_eq!((clean["feet"].as_u64(), clean["cleaned_up"].as_bool()), (Some(2), Some(true)), "{clean}");
+    assert!(clean["real"]["subject"].as_str().unwrap().split(", ").any(|s| s == "person"), "{clean}");
+    let ratio = clean["jitter"].as_f64().unwrap() / clean["real"]["jitter"].as_f64().unwrap();
+    assert!((clean["jitter_ratio"].as_f64().unwrap() - ratio).abs() < 1e-4, "{clean}");
+    assert!(clean["text_similarity"].as_f64().is_some_and(|t| (-1.0..=1.0).contains(&t)), "{clean}");
+    // Without the cleanup: the same motion as decoded, which shakes more and goes through the floor.
+    let (raw, _) = generate(&walk, "a person walks forward", "raw.bvh", &["--no-cleanup"]);
+    let raw = report(&raw);
+    assert_eq!((raw["cleaned_up"].as_bool(), raw["planted"].as_f64()), (Some(false), Some(0.0)), "{raw}");
+    assert!(clean["jitter"].as_f64() < raw["jitter"].as_f64(), "{clean} against {raw}");
+    assert!(clean["ground_penetration"].as_f64() < raw["ground_penetration"].as_f64(), "{clean} against {raw}");
+
+    // Every rig: a spider's eight feet, a horse's four, and a dolphin, which has none.
+    let spider = unzip("quaternius/bvh/easy_enemies_pack/Spider__Spider_Walk.bvh.gz", "spider.bvh");
+    let horse = unzip("quaternius/bvh/animals_pack/Horse__Walk.bvh.gz", "horse.bvh");
+    let dolphin = unzip("quaternius/bvh/fish_pack/Dolphin__Swim.bvh.gz", "dolphin.bvh");
+    for (skeleton, prompt, feet) in
+        [(&spider, "a spider walks", 8), (&horse, "a horse walks forward", 4), (&dolphin, "a dolphin swims", 0)]
+    {
+        let (made, _) = generate(skeleton, prompt, "animal.bvh", &[]);
+        let quality = report(&made);
+        assert_eq!(quality["feet"], feet, "{prompt}: {quality}");
+        assert_eq!(quality["foot_skating"].is_null(), feet == 0, "{prompt}: {quality}");
+    }
+}

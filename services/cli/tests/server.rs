@@ -66,6 +66,37 @@ async fn wait_for_job(client: &reqwest::Client, base: &str, id: i64) -> Value {
     }
 }
 
+/// How much higher than real clips of its rig the lowest foot may be on average (the issue's
+/// bound for walks: twice real).
+const FLOATING: f64 = 2.0;
+
+/// How much more a generated walk may shake than real clips of its rig, in these tests.
+const JITTER_RATIO: f64 = 3.0;
+
+/// How far the body's mean height may stray from real clips of its rig (a dog on its hind legs
+/// carries its body about twice as high).
+const POSTURE: f64 = 0.35;
+
+/// Checks that a generated animal's quality report says it is plausible for its rig (whose
+/// clips in the corpus include `subject`): feet found and planted on the floor, no jumps, its
+/// body carried at the height real clips carry it, and, for a walk, shaking within a factor of
+/// the real clips' median (a gallop is more lively than most clips of its rig).
+fn plausible(quality: &Value, subject: &str, walk: bool) {
+    let real = &quality["real"];
+    assert!(real["subject"].as_str().unwrap().split(", ").any(|s| s == subject), "{quality}");
+    assert!(quality["feet"].as_u64().unwrap() >= 2 && quality["cleaned_up"].as_bool().unwrap(), "{quality}");
+    assert!(quality["planted"].as_f64().unwrap() > 0.2, "{quality}");
+    let flight = quality["foot_flight"].as_f64().unwrap() / real["foot_flight"].as_f64().unwrap();
+    assert!(flight < FLOATING, "the feet float {flight} times as high as real clips' ({quality})");
+    assert!(quality["max_step"].as_f64().unwrap() < 0.1, "{quality}");
+    let height = quality["body_height"].as_f64().unwrap() / real["body_height"].as_f64().unwrap();
+    assert!((height - 1.0).abs() < POSTURE, "the body is carried at {height} times the real clips' height ({quality})");
+    let ratio = quality["jitter_ratio"].as_f64().unwrap();
+    assert!(!walk || ratio < JITTER_RATIO, "jitter {ratio} times the real clips' ({quality})");
+    let text = quality["text_similarity"].as_f64().unwrap();
+    assert!((-1.0..=1.0).contains(&text), "{quality}");
+}
+
 #[test]
 fn rest_and_grpc_serve_every_capability() {
     let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
@@ -101,14 +132,17 @@ fn rest_and_grpc_serve_every_capability() {
         let response = client.post(format!("{base}/v1/generate")).multipart(form).send().await.unwrap();
         assert_eq!(response.status(), 200);
         let id: i64 = response.headers()["x-generation-id"].to_str().unwrap().parse().unwrap();
+        let quality: Value = serde_json::from_str(response.headers()["x-quality"].to_str().unwrap()).unwrap();
         let bvh_text = response.bytes().await.unwrap().to_vec();
         assert_eq!(joint_names(&bvh_text), husky_joints);
         assert_eq!(frames(&bvh_text), 60);
-        // The result is stored and fetched again byte for byte.
+        plausible(&quality, "husky dog", true);
+        // The result is stored and fetched again byte for byte, with its quality report.
         let again = client.get(format!("{base}/v1/generations/{id}/samples/0")).send().await.unwrap();
         assert_eq!(again.bytes().await.unwrap().to_vec(), bvh_text);
         let record: Value = get_json(&client, format!("{base}/v1/generations/{id}")).await;
         assert_eq!(record["request"]["prompt"], "a dog walks");
+        assert_eq!(record["quality"], serde_json::json!([quality]));
 
         // JSON: every sample with its BVH; sample 0 of seed 0 is the motion above.
         let form = Form::new()
@@ -130,6 +164,8 @@ fn rest_and_grpc_serve_every_capability() {
         assert_eq!(samples.len(), 2);
         assert_eq!(samples[0]["bvh"].as_str().unwrap().as_bytes(), bvh_text.as_slice());
         assert_ne!(samples[0]["bvh"], samples[1]["bvh"]);
+        assert_eq!(samples[0]["quality"], quality, "the same motion has the same report");
+        plausible(&samples[1]["quality"], "husky dog", true);
 
         // JSON with a stored skeleton.
         let skeletons: Value = get_json(&client, format!("{base}/v1/skeletons")).await;
@@ -141,9 +177,11 @@ fn rest_and_grpc_serve_every_capability() {
             serde_json::json!({ "prompt": "a horse gallops", "seconds": 1.5, "skeleton_id": horse_id, "seed": 3 });
         let response = client.post(format!("{base}/v1/generate")).json(&body).send().await.unwrap();
         assert_eq!(response.status(), 200);
+        let quality: Value = serde_json::from_str(response.headers()["x-quality"].to_str().unwrap()).unwrap();
         let text = response.bytes().await.unwrap();
         assert_eq!(joint_names(&text), joint_names(&horse_bvh));
         assert_eq!(frames(&text), 45);
+        plausible(&quality, "horse", false);
 
         // Refusals are JSON with a code and say what to change.
         let generate = |form: Form| client.post(format!("{base}/v1/generate")).multipart(form).send();
@@ -217,7 +255,21 @@ fn rest_and_grpc_serve_every_capability() {
             Form::new().text("clip_id", horse_clip["id"].to_string()).part("skeleton", file(husky.clone(), "h.bvh"));
         let response = client.post(format!("{base}/v1/transfer")).multipart(form).send().await.unwrap();
         assert_eq!(response.status(), 200);
+        let quality: Value = serde_json::from_str(response.headers()["x-quality"].to_str().unwrap()).unwrap();
         assert_eq!(joint_names(&response.bytes().await.unwrap()), husky_joints);
+        assert_eq!((quality["cleaned_up"].as_bool(), quality["text_similarity"].as_f64()), (Some(true), None));
+        // The cleanup can be turned off.
+        let form = Form::new()
+            .text("clip_id", horse_clip["id"].to_string())
+            .text("cleanup", "false")
+            .part("skeleton", file(husky.clone(), "h.bvh"));
+        let response = client.post(format!("{base}/v1/transfer")).multipart(form).send().await.unwrap();
+        let quality: Value = serde_json::from_str(response.headers()["x-quality"].to_str().unwrap()).unwrap();
+        assert_eq!((quality["cleaned_up"].as_bool(), quality["planted"].as_f64()), (Some(false), Some(0.0)));
+        let form =
+            Form::new().text("clip_id", "1").text("cleanup", "maybe").part("skeleton", file(husky.clone(), "h.bvh"));
+        let response = client.post(format!("{base}/v1/transfer")).multipart(form).send().await.unwrap();
+        refused(response, 400, "bad_request", "cleanup must be true or false").await;
 
         // Tokens: tokenize a clip, decode the tokens onto the horse.
         let body = serde_json::json!({ "clip_id": walk_id });
@@ -382,6 +434,13 @@ async fn grpc(base: &str, husky: &[u8], husky_joints: &[String]) {
     let reply = client.generate(request).await.unwrap().into_inner();
     assert_eq!(reply.frames, 60);
     assert_eq!(joint_names(reply.bvh[0].as_bytes()), husky_joints);
+    assert_eq!(reply.quality.len(), 1);
+    let quality = &reply.quality[0];
+    assert!(quality.cleaned_up && quality.feet >= 2 && quality.text_similarity.is_some(), "{quality:?}");
+    assert!(
+        quality.real.as_ref().is_some_and(|r| r.subject.contains("husky dog") && r.body_height > 0.0),
+        "{quality:?}"
+    );
     let search = client
         .search(proto::SearchRequest { text: "a horse gallops".into(), limit: 2, ..Default::default() })
         .await
@@ -394,11 +453,15 @@ async fn grpc(base: &str, husky: &[u8], husky_joints: &[String]) {
         .unwrap_err();
     assert_eq!(refused.code(), tonic::Code::InvalidArgument);
     let moved = client
-        .transfer(proto::TransferRequest { clip_bvh: text.clone(), target_bvh: text.clone() })
+        .transfer(proto::TransferRequest { clip_bvh: text.clone(), target_bvh: text.clone(), cleanup: None })
         .await
         .unwrap()
         .into_inner();
     assert_eq!(joint_names(moved.bvh.as_bytes()), husky_joints);
+    assert!(
+        moved.quality.is_some_and(|q| q.feet >= 2 && q.text_similarity.is_none()),
+        "a transfer's report, without a prompt"
+    );
 
     // Reflection lists the service.
     use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;

@@ -89,10 +89,19 @@ async fn contract(store: &Store, encoder: &mut CachedEncoder, items: &[Item]) {
 async fn server_contract(store: &Store) {
     let samples = ["first".to_string(), "second".to_string()];
     let request = serde_json::json!({ "prompt": "a dog walks" });
-    let new = NewGeneration { kind: "generate", request: request.clone(), frames: 60, fps: 30.0, samples: &samples };
+    let quality = serde_json::json!([{ "jitter": 1.5 }, { "jitter": 2.5 }]);
+    let new = NewGeneration {
+        kind: "generate",
+        request: request.clone(),
+        frames: 60,
+        fps: 30.0,
+        samples: &samples,
+        quality: quality.clone(),
+    };
     let id = store.insert_generation(&new).await.unwrap();
     let stored = store.generation(id).await.unwrap().unwrap();
     assert_eq!((stored.kind.as_str(), stored.samples, stored.frames, stored.request), ("generate", 2, 60, request));
+    assert_eq!(stored.quality, Some(quality), "each sample's report comes back");
     assert_eq!(store.generation_sample(id, 1).await.unwrap().unwrap(), b"second");
     assert!(store.generation_sample(id, 2).await.unwrap().is_none());
 

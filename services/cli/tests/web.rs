@@ -126,6 +126,17 @@ fn the_page_generates_plays_searches_and_transfers() {
     assert!(report["error"].as_str().unwrap().contains("line 4"), "{report}");
     assert!(report["firstHit"].as_str().unwrap().contains("horse"), "{report}");
     assert!(report["similar"].as_u64().unwrap() > 0 && report["joints"].as_u64().unwrap() >= 20, "{report}");
+    // The page shows each sample's quality report, and it says the dog is plausible: feet found
+    // and on the floor (no higher than twice real husky clips'), no jumps, its body carried at
+    // the height real clips carry it, shaking within three times real clips'.
+    let quality = &report["generateQuality"];
+    let real = &quality["real"];
+    assert!(quality["feet"].as_u64().unwrap() >= 2 && quality["max_step"].as_f64().unwrap() < 0.1, "{report}");
+    assert!(quality["foot_flight"].as_f64().unwrap() < 2.0 * real["foot_flight"].as_f64().unwrap(), "{report}");
+    let height = quality["body_height"].as_f64().unwrap() / real["body_height"].as_f64().unwrap();
+    assert!((height - 1.0).abs() < 0.35, "{report}");
+    assert!(quality["jitter_ratio"].as_f64().unwrap() < 3.0, "{report}");
+    assert!(quality["text_similarity"].as_f64().is_some_and(|t| (-1.0..=1.0).contains(&t)), "{report}");
     for shot in ["generate.png", "library.png", "transfer.png", "generate-sample-1.png", "generate-sample-2.png"] {
         let bytes = std::fs::read(screenshots.join(shot)).unwrap_or_else(|e| panic!("{shot}: {e}"));
         assert!(bytes.starts_with(b"\x89PNG"), "{shot} is a PNG");

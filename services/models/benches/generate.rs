@@ -1,16 +1,18 @@
 //! Prompt -> BVH latency with the shipped checkpoints: sentence embedding, masked generation,
-//! residual layers, decoding onto the skeleton, restoring it to the user's units and writing the
-//! BVH text, for 4 s of motion on a 22-joint and a 50-joint skeleton. The target is prepared once
+//! residual layers, decoding onto the skeleton, the cleanup and the quality report (the prompt
+//! scored by the evaluator), restoring it to the user's units and writing the BVH text, for 4 s
+//! of motion on a 22-joint and a 50-joint skeleton. The target is prepared once
 //! (a server caches it per skeleton); every request embeds its prompt anew. Each thread count runs
 //! in a child process, since candle reads RAYON_NUM_THREADS when it starts a matmul.
 //!
-//! `cargo bench -p anymo-services --bench generate` (needs ../shared/data and `tools/setup.sh`).
+//! `cargo bench -p anymo-models --bench generate` (needs ../shared/data and `tools/setup.sh`).
 
 use anymo_generator::Request;
 use anymo_generator::sampling::Sampling;
 use anymo_models::checkpoint::Checkpoint;
 use anymo_models::studio::Studio;
 use anymo_motion::bvh;
+use anymo_motion::motion::Motion;
 use anymo_tokenizer::text::{CachedEncoder, SentenceEncoder};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -32,8 +34,10 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 fn child(data: &Path, threads: &str) {
     let encoder = SentenceEncoder::load(anymo_paths::encoder_dir().expect("a home folder or ANYMO_MODELS"))
         .expect("bash tools/setup.sh --models");
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints");
     let mut studio = Studio::load(
-        &Checkpoint::in_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints"), "generator"),
+        &Checkpoint::in_dir(&shipped, "generator"),
+        &Checkpoint::in_dir(&shipped, "evaluator"),
         CachedEncoder::new(encoder),
     )
     .expect("the shipped generator");
@@ -41,16 +45,17 @@ fn child(data: &Path, threads: &str) {
         ["bandai/dataset-1/dataset-1_walk_normal_001.bvh.gz", "quaternius/bvh/animals_pack/Husky__Attack.bvh.gz"]
     {
         let clip = bvh::read_path(data.join(file), bvh::ReadOptions::default()).expect("a corpus clip");
-        let target = studio.target(clip.skeleton()).expect("an animatable skeleton");
+        let target = studio.target(&Motion::from_bvh(&clip)).expect("an animatable skeleton");
         let steps = studio.steps(4.0).expect("4 s is within the limit");
         let mut times = Vec::with_capacity(RUNS);
         for run in 0..RUNS + 3 {
             let started = Instant::now();
             let request = Request { steps: Some(steps), samples: 1, sampling: Sampling::default(), seed: run as u64 };
-            let samples = studio.generate(PROMPTS[run % PROMPTS.len()], &target, &request).expect("generation");
-            let motion = studio.render(samples, [0.0; 3], Some(120), &target).expect("decoding").remove(0);
+            let prompt = PROMPTS[run % PROMPTS.len()];
+            let samples = studio.generate(prompt, &target, &request).expect("generation");
+            let made = studio.render(samples, [0.0; 3], Some(120), &target, prompt).expect("decoding").remove(0);
             let mut out = Vec::new();
-            bvh::write(&motion.to_bvh(), &mut out).expect("writing BVH");
+            bvh::write(&made.motion.to_bvh(), &mut out).expect("writing BVH");
             if run >= 3 {
                 times.push(started.elapsed().as_secs_f64() * 1000.0);
             }

@@ -10,6 +10,7 @@ pub mod data;
 pub mod error;
 pub mod eval;
 pub mod generation;
+pub mod quality;
 pub mod recipe;
 pub mod search;
 pub mod studio;

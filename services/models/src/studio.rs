@@ -7,11 +7,13 @@ use super::data::MODEL_FPS;
 use super::generation;
 use crate::checkpoint::Checkpoint;
 use crate::error::ModelError;
+use crate::quality::{Made, QualityReport, RealMotion, clean_up};
 use anymo_generator::generate::Codes;
-use anymo_generator::{GenerationError, Generator, Request};
+use anymo_generator::{Evaluator, GenerationError, Generator, Request};
+use anymo_motion::cleanup::Cleanup;
 use anymo_motion::motion::Motion;
+use anymo_motion::posture::upright;
 use anymo_motion::prep::clean::{CleanClip, CleanOptions, clean};
-use anymo_motion::skeleton::Skeleton;
 use anymo_tokenizer::owo::SkeletonGraph;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, encode_whole};
 use anymo_tokenizer::tat::{Basis, Tat};
@@ -37,6 +39,19 @@ pub fn cleaned_clip(motion: &Motion) -> Result<CleanClip> {
     Ok(CleanClip { motion: cleaned.motion.resample(MODEL_FPS), ..cleaned })
 }
 
+/// What the reference pose of a target is taken from (a tokenizer of the reference
+/// representation writes motion around it): a user's file's frames when it has motion (more
+/// than one frame), else its one pose (its only frame, or its rest pose) stood up (see
+/// [`upright`]). A rest pose that is no pose at all (every bone along one axis, as in Bandai's,
+/// LAFAN1's and CMU's files) gives no usable reference: such rigs need a file with motion.
+pub fn pose_source(file: &Motion) -> Motion {
+    match file.frames() {
+        0 => upright(&Motion::rest_pose(file.skeleton(), 1.0 / MODEL_FPS)),
+        1 => upright(file),
+        _ => file.clone(),
+    }
+}
+
 /// The frames `seconds` of motion take at the models' frame rate.
 pub fn frames_of(seconds: f64) -> usize {
     (seconds * MODEL_FPS).round() as usize
@@ -59,7 +74,8 @@ pub struct Target {
     pub embedding: Vec<f32>,
 }
 
-/// The tokenizer, a generator and the sentence encoder, loaded once.
+/// The tokenizer, a generator and the sentence encoder, loaded once, with what judges the
+/// motion it makes and how that motion is cleaned up.
 pub struct Studio {
     /// The tokenizer the generator's codes belong to.
     pub tat: Tat,
@@ -67,16 +83,31 @@ pub struct Studio {
     pub generator: Generator,
     /// The sentence encoder (with a cache of node texts).
     pub encoder: CachedEncoder,
+    /// The evaluator, when it reads the generator's tokenizer: it scores motion against prompts.
+    judge: Option<Evaluator>,
+    /// Real clips' figures per skeleton, from the evaluator's card.
+    real: RealMotion,
+    /// The cleanup decoded motion gets (`None`: none).
+    cleanup: Option<Cleanup>,
 }
 
 impl Studio {
-    /// Loads a generator checkpoint with the tokenizer it was trained on.
-    pub fn load(generator: &Checkpoint, encoder: CachedEncoder) -> Result<Studio> {
+    /// Loads a generator checkpoint with the tokenizer it was trained on, and the evaluator
+    /// `evaluator` for the quality reports (its prompt score only when it reads the same
+    /// tokenizer). Decoded motion gets the default cleanup; see [`Studio::set_cleanup`].
+    pub fn load(generator: &Checkpoint, evaluator: &Checkpoint, encoder: CachedEncoder) -> Result<Studio> {
         let (model, card) = generation::load_generator(generator)?;
         let mut encoder = encoder;
         let tat = generator.load_tat_of(&card, &mut encoder)?;
-        let generator = model;
-        Ok(Studio { tat, generator, encoder })
+        let (judge, judge_card) = generation::load_evaluator(evaluator)?;
+        let real = RealMotion::from_card_metrics(&judge_card.metrics);
+        let judge = (judge_card.config.trained_on == card.config.trained_on).then_some(judge);
+        Ok(Studio { tat, generator: model, encoder, judge, real, cleanup: Some(Cleanup::default()) })
+    }
+
+    /// Sets the cleanup decoded motion gets (`None` gives the decoder's output as it is).
+    pub fn set_cleanup(&mut self, cleanup: Option<Cleanup>) {
+        self.cleanup = cleanup;
     }
 
     /// Frames one token step covers.
@@ -102,12 +133,14 @@ impl Studio {
         Ok(self.encoder.encode(&[prompt])?.remove(0))
     }
 
-    /// A skeleton to animate, from any skeleton (its rest pose is its offsets).
-    pub fn target(&mut self, skeleton: &Skeleton) -> Result<Target> {
-        let rest = Motion::rest_pose(skeleton, 1.0 / MODEL_FPS);
-        let cleaned = clean(&rest, &CleanOptions::default())
+    /// A skeleton to animate, from a user's file: the motion is written around a pose taken
+    /// from it (see [`pose_source`]).
+    pub fn target(&mut self, file: &Motion) -> Result<Target> {
+        let cleaned = clean(&pose_source(file), &CleanOptions::default())
             .map_err(|r| refuse(format!("the skeleton cannot be animated: {r}")))?;
-        self.prepare(rest, cleaned)
+        let source =
+            if file.frames() > 0 { file.slice(0, 1) } else { Motion::rest_pose(file.skeleton(), 1.0 / MODEL_FPS) };
+        self.prepare(source, cleaned)
     }
 
     /// A user's clip to edit, with its codes and where it starts.
@@ -140,7 +173,7 @@ impl Studio {
         target: &Target,
         seconds: Option<f64>,
         request: &Request,
-    ) -> Result<Vec<Motion>> {
+    ) -> Result<Vec<Made>> {
         let steps = match seconds {
             Some(s) => self.steps(s)?,
             None => {
@@ -149,11 +182,11 @@ impl Studio {
             }
         };
         let samples = self.generate(prompt, target, &Request { steps: Some(steps), ..request.clone() })?;
-        self.render(samples, [0.0; 3], seconds.map(frames_of), target)
+        self.render(samples, [0.0; 3], seconds.map(frames_of), target, prompt)
     }
 
     /// A clip with the span `from..to` seconds regenerated from a prompt and the rest kept.
-    pub fn inpaint(&mut self, clip: &Motion, prompt: &str, span: (f64, f64), request: &Request) -> Result<Vec<Motion>> {
+    pub fn inpaint(&mut self, clip: &Motion, prompt: &str, span: (f64, f64), request: &Request) -> Result<Vec<Made>> {
         let (from, to) = span;
         if !(from >= 0.0 && to > from) {
             return Err(refuse(format!("the span must satisfy 0 <= from < to; got {from}..{to}")));
@@ -169,23 +202,25 @@ impl Studio {
         let text = self.text(prompt)?;
         let samples = self.generator.inpaint(&text, &target.embedding, &codes, &keep, request).map_err(refusal_of)?;
         let frames = target.cleaned.motion.frames();
-        self.render(samples, start, Some(frames), &target)
+        self.render(samples, start, Some(frames), &target, prompt)
     }
 
     /// A clip followed by `seconds` of new motion from a prompt.
-    pub fn extend(&mut self, clip: &Motion, prompt: &str, seconds: f64, request: &Request) -> Result<Vec<Motion>> {
+    pub fn extend(&mut self, clip: &Motion, prompt: &str, seconds: f64, request: &Request) -> Result<Vec<Made>> {
         let extra = self.steps(seconds)?;
         let (target, codes, start) = self.clip(clip)?;
         let text = self.text(prompt)?;
         let samples = self.generator.extend(&text, &target.embedding, &codes, extra, request).map_err(refusal_of)?;
         let frames = target.cleaned.motion.frames() + frames_of(seconds);
-        self.render(samples, start, Some(frames), &target)
+        self.render(samples, start, Some(frames), &target, prompt)
     }
 
-    /// Prompts one after another on a skeleton, each `(prompt, seconds)` flowing into the next.
-    pub fn chain(&mut self, skeleton: &Skeleton, parts: &[(String, f64)], request: &Request) -> Result<Vec<Motion>> {
+    /// Prompts one after another on a skeleton (a user's file, see [`Studio::target`]), each
+    /// `(prompt, seconds)` flowing into the next.
+    /// Their prompt score is against the prompts joined by ", then ".
+    pub fn chain(&mut self, file: &Motion, parts: &[(String, f64)], request: &Request) -> Result<Vec<Made>> {
         self.steps(parts.iter().map(|p| p.1).sum()).map_err(|e| refuse(format!("the chain as a whole: {e}")))?;
-        let target = self.target(skeleton)?;
+        let target = self.target(file)?;
         let mut conditions = Vec::with_capacity(parts.len());
         for (prompt, seconds) in parts {
             conditions.push((self.text(prompt)?, self.steps(*seconds)?));
@@ -193,30 +228,52 @@ impl Studio {
         let refs: Vec<(&[f32], usize)> = conditions.iter().map(|(t, s)| (t.as_slice(), *s)).collect();
         let samples = self.generator.chain(&refs, &target.embedding, request).map_err(refusal_of)?;
         let frames = parts.iter().map(|p| frames_of(p.1)).sum();
-        self.render(samples, [0.0; 3], Some(frames), &target)
+        let prompt: Vec<&str> = parts.iter().map(|p| p.0.as_str()).collect();
+        self.render(samples, [0.0; 3], Some(frames), &target, &prompt.join(", then "))
     }
 
-    /// Decodes samples onto the target, cut to `frames` when given, back on the user's skeleton
-    /// and in the user's units.
+    /// Decodes samples onto the target, cut to `frames` when given, cleaned up, back on the
+    /// user's skeleton and in the user's units, each with its quality report (scored against
+    /// `prompt`).
     pub fn render(
-        &self,
+        &mut self,
         samples: Vec<Codes>,
         start: [f32; 3],
         frames: Option<usize>,
         target: &Target,
-    ) -> Result<Vec<Motion>> {
+        prompt: &str,
+    ) -> Result<Vec<Made>> {
         let skeleton = target.entered.skeleton();
-        samples
-            .into_iter()
-            .map(|codes| {
-                let mut tokens = Tokens::whole(codes, self.frames_per_token(), MODEL_FPS);
-                tokens.start = start;
-                let decoded = target.basis.leave(&detokenize(&self.tat, &tokens, &target.graph, skeleton)?);
-                let decoded = decoded.slice(0, frames.unwrap_or(decoded.frames()));
-                Ok(target.cleaned.restore(&decoded, &target.source))
-            })
-            .collect()
+        let mut made = Vec::with_capacity(samples.len());
+        for codes in samples {
+            let mut tokens = Tokens::whole(codes, self.frames_per_token(), MODEL_FPS);
+            tokens.start = start;
+            let decoded = target.basis.leave(&detokenize(&self.tat, &tokens, &target.graph, skeleton)?);
+            let decoded = decoded.slice(0, frames.unwrap_or(decoded.frames()));
+            let (motion, planting) = clean_up(decoded, self.cleanup.as_ref(), &self.real);
+            let text = self.text_similarity(prompt, &motion, target)?;
+            let quality = QualityReport::of(&motion, planting, self.real.of(&motion), text);
+            made.push(Made { motion: target.cleaned.restore(&motion, &target.source), quality });
+        }
+        Ok(made)
     }
+
+    /// The cosine of the prompt and a motion (cleaned form, on the target) in the evaluator's
+    /// space, when the evaluator reads this generator's tokenizer.
+    fn text_similarity(&mut self, prompt: &str, motion: &Motion, target: &Target) -> Result<Option<f32>> {
+        let Some(judge) = &self.judge else { return Ok(None) };
+        let encoded = encode_whole(&mut self.tat, &target.graph, &target.basis.enter(motion))?;
+        let width = judge.config().max_tokens * judge.config().latent_dim;
+        let motion = judge.embed_one(&encoded.latent[..encoded.latent.len().min(width)])?;
+        let text = judge.embed_sentence(&self.encoder.encode(&[prompt])?.remove(0))?;
+        Ok(Some(cosine(&motion, &text)))
+    }
+}
+
+fn cosine(a: &[f32], b: &[f32]) -> f32 {
+    let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    let norm = |v: &[f32]| v.iter().map(|x| x * x).sum::<f32>().sqrt();
+    dot / (norm(a) * norm(b)).max(f32::MIN_POSITIVE)
 }
 
 /// A generator error, as a refusal when the request caused it.

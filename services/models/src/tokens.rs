@@ -3,9 +3,11 @@
 
 use super::codecs::Graphs;
 use super::data::MODEL_FPS;
-use super::studio::cleaned_clip;
+use super::studio::{cleaned_clip, pose_source};
 use crate::checkpoint::Checkpoint;
 use crate::error::ModelError;
+use crate::quality::{Made, QualityReport, RealMotion, clean_up};
+use anymo_motion::cleanup::Cleanup;
 use anymo_motion::motion::Motion;
 use anymo_motion::prep::clean::{CleanOptions, clean};
 use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
@@ -29,12 +31,15 @@ pub struct TokenFile {
     pub tokens: Tokens,
 }
 
-/// A trained tokenizer with the sentence encoder its skeleton graphs need.
+/// A trained tokenizer with the sentence encoder its skeleton graphs need, the cleanup decoded
+/// motion gets and the real clips' figures its quality reports compare with.
 pub struct TokenCodec {
     tat: Tat,
     name: String,
     steps: u64,
     encoder: CachedEncoder,
+    cleanup: Option<Cleanup>,
+    real: RealMotion,
 }
 
 impl TokenCodec {
@@ -42,7 +47,25 @@ impl TokenCodec {
     pub fn load(tokenizer: &Checkpoint, encoder: CachedEncoder) -> anyhow::Result<TokenCodec> {
         let mut encoder = encoder;
         let (tat, card) = tokenizer.load_tat(&mut encoder)?;
-        Ok(TokenCodec { tat, name: tokenizer.name().to_string(), steps: card.steps, encoder })
+        let name = tokenizer.name().to_string();
+        Ok(TokenCodec {
+            tat,
+            name,
+            steps: card.steps,
+            encoder,
+            cleanup: Some(Cleanup::default()),
+            real: RealMotion::default(),
+        })
+    }
+
+    /// Sets the cleanup decoded motion gets (`None` gives the decoder's output as it is).
+    pub fn set_cleanup(&mut self, cleanup: Option<Cleanup>) {
+        self.cleanup = cleanup;
+    }
+
+    /// Sets the real clips' figures the quality reports compare with.
+    pub fn set_real_motion(&mut self, real: RealMotion) {
+        self.real = real;
     }
 
     /// A clip's tokens. A tokenizer of the reference representation reads the clip against
@@ -59,24 +82,29 @@ impl TokenCodec {
     /// Tokens as motion on `target`'s skeleton (in its units, with its hierarchy and channels)
     /// at `fps` frames per second, refused when they do not fit this checkpoint or do not
     /// describe a clip. A tokenizer of the reference representation writes the motion around
-    /// the mean pose of the target's frames, or its rest pose when it has none.
-    pub fn detokenize(&mut self, tokens: &Tokens, target: &Motion, fps: f64) -> Result<Motion> {
+    /// a pose taken from the target (see [`pose_source`]). The motion is
+    /// cleaned up (see [`TokenCodec::set_cleanup`]) and comes with its quality report.
+    pub fn detokenize(&mut self, tokens: &Tokens, target: &Motion, fps: f64) -> Result<Made> {
         self.check(tokens).map_err(ModelError::Refused)?;
         if !(fps > 0.0 && fps <= MAX_FPS) {
             return Err(ModelError::refused(format!("the frame rate must be in (0, {MAX_FPS}]; {fps} was asked")));
         }
         let representation = self.tat.config().representation;
-        let posed = representation == Representation::Reference && target.frames() > 0;
-        let source = if posed { target.clone() } else { Motion::rest_pose(target.skeleton(), 1.0 / MODEL_FPS) };
-        let cleaned = clean(&source, &CleanOptions::default())
+        let rest = || Motion::rest_pose(target.skeleton(), 1.0 / MODEL_FPS);
+        let posed = if representation == Representation::Reference { pose_source(target) } else { rest() };
+        let source = if target.frames() > 0 { target.slice(0, 1) } else { rest() };
+        let cleaned = clean(&posed, &CleanOptions::default())
             .map_err(|r| ModelError::refused(format!("the skeleton cannot be used as a target: {r}")))?;
         let basis = Basis::of(representation, cleaned.motion.skeleton(), [&cleaned.motion]);
         let skeleton = basis.enter_skeleton(&cleaned.motion);
         let graph = Graphs::new(&mut self.encoder).of(&skeleton)?;
         let decoded = basis.leave(&detokenize(&self.tat, tokens, &graph, &skeleton)?);
+        let (decoded, planting) = clean_up(decoded, self.cleanup.as_ref(), &self.real);
+        let quality = QualityReport::of(&decoded, planting, self.real.of(&decoded), None);
         let restored = cleaned.restore(&decoded, &source);
         // The models run at MODEL_FPS; the answer comes at the rate asked for.
-        Ok(if (restored.fps() - fps).abs() > 1e-9 { restored.resample(fps) } else { restored })
+        let motion = if (restored.fps() - fps).abs() > 1e-9 { restored.resample(fps) } else { restored };
+        Ok(Made { motion, quality })
     }
 
     /// Why tokens (perhaps from a client) cannot be decoded by this checkpoint, if they cannot:
@@ -120,7 +148,7 @@ impl TokenCodec {
 
     /// A clip moved onto `target`'s skeleton through tokens, at `fps` frames per second (see
     /// [`TokenCodec::detokenize`] for what the target's frames mean).
-    pub fn transfer(&mut self, motion: &Motion, target: &Motion, fps: f64) -> Result<Motion> {
+    pub fn transfer(&mut self, motion: &Motion, target: &Motion, fps: f64) -> Result<Made> {
         let file = self.tokenize(motion)?;
         self.detokenize(&file.tokens, target, fps)
     }

@@ -9,10 +9,11 @@ use super::motion::{ClipSource, SkeletonSource, bvh_text};
 use anymo_generator::Request;
 use anymo_generator::sampling::Sampling;
 use anymo_models::data::MODEL_FPS;
+use anymo_models::quality::{Made, QualityReport};
 use anymo_models::studio::{Studio, Target};
 use anymo_models::tokens::{TokenCodec, TokenFile};
+use anymo_motion::cleanup::Cleanup;
 use anymo_motion::motion::Motion;
-use anymo_motion::skeleton::Skeleton;
 use anymo_store::NewGeneration;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -40,14 +41,15 @@ impl GenerationModels {
         GenerationModels { studio, codec, targets: VecDeque::new() }
     }
 
-    /// The prepared target of a skeleton, from the cache when it was seen lately.
-    fn target(&mut self, skeleton: &Skeleton) -> Result<Arc<Target>, ApiError> {
-        let key = blake3::hash(format!("{skeleton:?}").as_bytes());
+    /// The prepared target of a skeleton's file (see [`Studio::target`]), from the cache when
+    /// the same file was seen lately.
+    fn target(&mut self, file: &Motion) -> Result<Arc<Target>, ApiError> {
+        let key = file_key(file);
         if let Some(k) = self.targets.iter().position(|(h, _)| *h == key) {
             let hit = self.targets.remove(k).expect("a found position");
             self.targets.push_back(hit);
         } else {
-            let target = self.studio.target(skeleton).map_err(ApiError::from_model)?;
+            let target = self.studio.target(file).map_err(ApiError::from_model)?;
             if self.targets.len() == CACHED_TARGETS {
                 self.targets.pop_front();
             }
@@ -55,6 +57,23 @@ impl GenerationModels {
         }
         Ok(self.targets.back().expect("just pushed").1.clone())
     }
+}
+
+/// What tells two skeleton files apart: the skeleton and every value of its frames.
+fn file_key(file: &Motion) -> blake3::Hash {
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(format!("{:?}", file.skeleton()).as_bytes());
+    for q in file.all_rotations() {
+        for v in q.to_array() {
+            hasher.update(&v.to_le_bytes());
+        }
+    }
+    for t in file.all_translations() {
+        for v in t.to_array() {
+            hasher.update(&v.to_le_bytes());
+        }
+    }
+    hasher.finalize()
 }
 
 /// How samples are drawn; anything left out takes the server's default.
@@ -70,6 +89,20 @@ pub struct SamplingOptions {
     pub temperature: Option<f32>,
     /// Draw only among the k likeliest tokens (default 0: all).
     pub top_k: Option<usize>,
+    /// Clean up the decoded motion: smoothing and planted feet (default true).
+    pub cleanup: Option<bool>,
+}
+
+impl SamplingOptions {
+    /// The cleanup these options ask for.
+    pub fn cleanup(&self) -> Option<Cleanup> {
+        cleanup_of(self.cleanup)
+    }
+}
+
+/// The cleanup a request's `cleanup` field asks for (absent: the default cleanup).
+pub fn cleanup_of(asked: Option<bool>) -> Option<Cleanup> {
+    asked.unwrap_or(true).then(Cleanup::default)
 }
 
 impl SamplingOptions {
@@ -108,6 +141,8 @@ pub struct Generated {
     pub fps: f64,
     /// Each sample's BVH text.
     pub samples: Vec<String>,
+    /// Each sample's quality report.
+    pub quality: Vec<QualityReport>,
 }
 
 /// Checks a prompt: not empty, not too long.
@@ -127,17 +162,17 @@ async fn keep(
     state: &AppState,
     kind: &str,
     request: serde_json::Value,
-    motions: Vec<Motion>,
+    made: Vec<Made>,
 ) -> Result<Generated, ApiError> {
-    let samples: Vec<String> = motions.iter().map(bvh_text).collect();
-    let frames = motions.first().map_or(0, Motion::frames);
-    let fps = motions.first().map_or(MODEL_FPS, Motion::fps);
-    let id = state
-        .store
-        .insert_generation(&NewGeneration { kind, request, frames: frames as i64, fps, samples: &samples })
-        .await?;
-    state.metrics.generated(kind, motions.len());
-    Ok(Generated { id, frames, fps, samples })
+    let samples: Vec<String> = made.iter().map(|m| bvh_text(&m.motion)).collect();
+    let frames = made.first().map_or(0, |m| m.motion.frames());
+    let fps = made.first().map_or(MODEL_FPS, |m| m.motion.fps());
+    let quality: Vec<QualityReport> = made.into_iter().map(|m| m.quality).collect();
+    let report = serde_json::to_value(&quality).map_err(|e| ApiError::internal(e.to_string()))?;
+    let new = NewGeneration { kind, request, frames: frames as i64, fps, samples: &samples, quality: report };
+    let id = state.store.insert_generation(&new).await?;
+    state.metrics.generated(kind, samples.len());
+    Ok(Generated { id, frames, fps, samples, quality })
 }
 
 /// What the stored record says of a skeleton source (the id, or that it was uploaded).
@@ -161,18 +196,20 @@ pub async fn generate(
         state.limits.check_seconds(s)?;
     }
     let request = sampling.request(state)?;
-    let target = state.skeleton(&skeleton).await?;
+    let (target, _) = state.target(&skeleton).await?;
     let record = serde_json::json!({
         "prompt": prompt, "seconds": seconds, "skeleton": describe(&skeleton), "sampling": sampling,
     });
-    let motions = state
+    let cleanup = sampling.cleanup();
+    let made = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
             let target = m.target(&target)?;
+            m.studio.set_cleanup(cleanup);
             m.studio.generate_motion(&prompt, &target, seconds, &request).map_err(ApiError::from_model)
         })
         .await?;
-    keep(state, "generate", record, motions).await
+    keep(state, "generate", record, made).await
 }
 
 /// An edit of a clip.
@@ -215,9 +252,11 @@ pub async fn edit(
         }
     };
     let motion = state.clip(&clip).await?;
-    let motions = state
+    let cleanup = sampling.cleanup();
+    let made = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
+            m.studio.set_cleanup(cleanup);
             let made = match edit {
                 Edit::Inpaint { from, to } => m.studio.inpaint(&motion, &prompt, (from, to), &request),
                 Edit::Continue { seconds } => m.studio.extend(&motion, &prompt, seconds, &request),
@@ -225,20 +264,28 @@ pub async fn edit(
             made.map_err(ApiError::from_model)
         })
         .await?;
-    keep(state, kind, record, motions).await
+    keep(state, kind, record, made).await
 }
 
 /// A clip moved onto another skeleton.
-pub async fn transfer(state: &AppState, clip: ClipSource, to: SkeletonSource) -> Result<Generated, ApiError> {
+/// `cleanup` as [`cleanup_of`] reads it.
+pub async fn transfer(
+    state: &AppState,
+    clip: ClipSource,
+    to: SkeletonSource,
+    cleanup: Option<bool>,
+) -> Result<Generated, ApiError> {
     let motion = state.clip(&clip).await?;
     let (target, fps) = state.target(&to).await?;
     let record = serde_json::json!({
         "clip": match &clip { ClipSource::Stored(id) => serde_json::json!({ "clip_id": id }), ClipSource::Bvh(b) => serde_json::json!({ "uploaded_bytes": b.len() }) },
         "to": describe(&to),
+        "cleanup": cleanup,
     });
     let moved = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
+            m.codec.set_cleanup(cleanup_of(cleanup));
             m.codec.transfer(&motion, &target, fps).map_err(ApiError::from_model)
         })
         .await?;
@@ -256,18 +303,26 @@ pub async fn tokenize(state: &AppState, clip: ClipSource) -> Result<TokenFile, A
         .await
 }
 
-/// Tokens as motion on a skeleton.
-pub async fn detokenize(state: &AppState, tokens: TokenFile, to: SkeletonSource) -> Result<Generated, ApiError> {
+/// Tokens as motion on a skeleton (`cleanup` as [`cleanup_of`] reads it).
+pub async fn detokenize(
+    state: &AppState,
+    tokens: TokenFile,
+    to: SkeletonSource,
+    cleanup: Option<bool>,
+) -> Result<Generated, ApiError> {
     if tokens.tokens.frames > state.limits.frames {
         return Err(ApiError::over_limit("frames of the tokens", state.limits.frames, tokens.tokens.frames));
     }
     let (target, fps) = state.target(&to).await?;
-    let record = serde_json::json!({ "model": tokens.model, "frames": tokens.tokens.frames, "to": describe(&to) });
-    let motion = state
+    let record = serde_json::json!({
+        "model": tokens.model, "frames": tokens.tokens.frames, "to": describe(&to), "cleanup": cleanup,
+    });
+    let made = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
+            m.codec.set_cleanup(cleanup_of(cleanup));
             m.codec.detokenize(&tokens.tokens, &target, fps).map_err(ApiError::from_model)
         })
         .await?;
-    keep(state, "detokenize", record, vec![motion]).await
+    keep(state, "detokenize", record, vec![made]).await
 }

@@ -7,6 +7,7 @@ use super::error::ApiError;
 use super::generation::{self, Edit, Generated, SamplingOptions};
 use super::motion::{ClipSource, SkeletonSource};
 use super::search::{SearchParams, search};
+use anymo_models::quality::QualityReport;
 use anymo_models::tokens::TokenFile;
 use std::sync::Arc;
 use tonic::{Request, Response, Status};
@@ -45,6 +46,7 @@ fn sampling(options: Option<proto::Sampling>) -> SamplingOptions {
         guidance: o.guidance,
         temperature: o.temperature,
         top_k: o.top_k.map(|k| k as usize),
+        cleanup: o.cleanup,
     }
 }
 
@@ -54,6 +56,39 @@ fn reply(generated: Generated) -> proto::GenerateReply {
         seconds: generated.frames as f64 / generated.fps.max(1e-9),
         frames: generated.frames as u32,
         bvh: generated.samples,
+        quality: generated.quality.iter().map(quality).collect(),
+    }
+}
+
+/// The first sample of a one-sample result.
+fn motion_reply(generated: Generated) -> proto::MotionReply {
+    proto::MotionReply {
+        quality: generated.quality.first().map(quality),
+        bvh: generated.samples.into_iter().next().unwrap_or_default(),
+    }
+}
+
+fn quality(q: &QualityReport) -> proto::Quality {
+    proto::Quality {
+        cleaned_up: q.cleaned_up,
+        feet: q.feet as u32,
+        planted: q.planted,
+        foot_skating: q.foot_skating,
+        foot_flight: q.foot_flight,
+        ground_penetration: q.ground_penetration,
+        jitter: q.jitter,
+        max_step: q.max_step,
+        body_height: q.body_height,
+        real: q.real.as_ref().map(|r| proto::RealMotion {
+            subject: r.subject.clone(),
+            clips: r.clips as u32,
+            jitter: r.jitter,
+            foot_skating: r.foot_skating,
+            foot_flight: r.foot_flight,
+            body_height: r.body_height,
+        }),
+        jitter_ratio: q.jitter_ratio,
+        text_similarity: q.text_similarity,
     }
 }
 
@@ -123,9 +158,10 @@ impl Anymo for AnymoService {
             &self.state,
             ClipSource::Bvh(r.clip_bvh.into_bytes()),
             SkeletonSource::Bvh(r.target_bvh.into_bytes()),
+            r.cleanup,
         )
         .await?;
-        Ok(Response::new(proto::MotionReply { bvh: made.samples.into_iter().next().unwrap_or_default() }))
+        Ok(Response::new(motion_reply(made)))
     }
 
     async fn tokenize(
@@ -155,8 +191,9 @@ impl Anymo for AnymoService {
         let r = request.into_inner();
         let tokens: TokenFile = serde_json::from_str(&r.tokens_json)
             .map_err(|e| ApiError::bad_request(format!("tokens_json is not a tokens file: {e}")))?;
-        let made = generation::detokenize(&self.state, tokens, SkeletonSource::Bvh(r.target_bvh.into_bytes())).await?;
-        Ok(Response::new(proto::MotionReply { bvh: made.samples.into_iter().next().unwrap_or_default() }))
+        let to = SkeletonSource::Bvh(r.target_bvh.into_bytes());
+        let made = generation::detokenize(&self.state, tokens, to, r.cleanup).await?;
+        Ok(Response::new(motion_reply(made)))
     }
 
     async fn search(&self, request: Request<proto::SearchRequest>) -> Result<Response<proto::SearchReply>, Status> {

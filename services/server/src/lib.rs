@@ -18,6 +18,7 @@ pub mod web;
 
 use anyhow::{Context, Result};
 use anymo_models::checkpoint::Checkpoints;
+use anymo_models::quality::RealMotion;
 use anymo_models::search::{SearchModels, open_library};
 use anymo_models::studio::Studio;
 use anymo_models::tokens::TokenCodec;
@@ -122,8 +123,10 @@ impl Server {
         for _ in 0..config.limits.workers.max(1) {
             let c = config.clone();
             let models = tokio::task::spawn_blocking(move || -> Result<GenerationModels> {
-                let studio = Studio::load(&c.checkpoints.get(&c.generator), encoder(&c)?)?;
-                let codec = TokenCodec::load(&c.checkpoints.get(&c.tokenizer), encoder(&c)?)?;
+                let evaluator = c.checkpoints.get(&c.evaluator);
+                let studio = Studio::load(&c.checkpoints.get(&c.generator), &evaluator, encoder(&c)?)?;
+                let mut codec = TokenCodec::load(&c.checkpoints.get(&c.tokenizer), encoder(&c)?)?;
+                codec.set_real_motion(RealMotion::of_evaluator(&evaluator)?);
                 Ok(GenerationModels::new(studio, codec))
             })
             .await??;

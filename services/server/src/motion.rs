@@ -5,7 +5,6 @@ use super::AppState;
 use super::error::ApiError;
 use anymo_motion::bvh::{self, Bvh, ReadOptions};
 use anymo_motion::motion::Motion;
-use anymo_motion::skeleton::Skeleton;
 use std::io::Read;
 
 /// Where a skeleton comes from.
@@ -55,27 +54,39 @@ pub fn parse_bvh(state: &AppState, what: &str, bytes: &[u8], require_motion: boo
 }
 
 impl AppState {
-    /// The skeleton a request names.
-    pub async fn skeleton(&self, source: &SkeletonSource) -> Result<Skeleton, ApiError> {
-        Ok(self.target(source).await?.0.skeleton().clone())
-    }
-
-    /// The skeleton a request names, with an uploaded file's frames when it has any (a
-    /// tokenizer of the reference representation poses motion around them), and the frame rate
-    /// motion decoded onto it takes: an uploaded file's own, 30 for a stored skeleton (the rate
-    /// the store keeps skeletons at).
+    /// The skeleton a request names, with frames when there are some (a tokenizer of the
+    /// reference representation poses motion around them): an uploaded file's own, or for a
+    /// stored skeleton the motion of its first stored clip. With it, the frame rate motion
+    /// decoded onto it takes: an uploaded file's own, 30 for a stored skeleton (the rate the
+    /// store keeps skeletons at).
     pub async fn target(&self, source: &SkeletonSource) -> Result<(Motion, f64), ApiError> {
-        let file = match source {
-            SkeletonSource::Bvh(bytes) => parse_bvh(self, "the skeleton", bytes, false)?,
+        match source {
+            SkeletonSource::Bvh(bytes) => {
+                let file = parse_bvh(self, "the skeleton", bytes, false)?;
+                Ok((Motion::from_bvh(&file), file.fps()))
+            }
             SkeletonSource::Stored(id) => {
                 let row = self.store.skeleton(*id).await?.ok_or_else(|| {
                     ApiError::not_found(format!("no skeleton {id} in the store (GET /v1/skeletons lists them)"))
                 })?;
-                bvh::read(row.hierarchy.as_bytes(), ReadOptions::default())
-                    .map_err(|e| ApiError::internal(format!("stored skeleton {id} does not parse: {e}")))?
+                let file = bvh::read(row.hierarchy.as_bytes(), ReadOptions::default())
+                    .map_err(|e| ApiError::internal(format!("stored skeleton {id} does not parse: {e}")))?;
+                let skeleton = Motion::from_bvh(&file);
+                let posed = match self.store.first_clip_of_skeleton(*id).await? {
+                    Some(clip) => self.clip(&ClipSource::Stored(clip)).await?,
+                    None => skeleton.clone(),
+                };
+                // The clip is on the same skeleton; its joints must line up with the stored one's.
+                let same = posed.skeleton().len() == skeleton.skeleton().len()
+                    && posed
+                        .skeleton()
+                        .joints()
+                        .iter()
+                        .zip(skeleton.skeleton().joints())
+                        .all(|(a, b)| a.name == b.name);
+                Ok((if same { posed } else { skeleton }, file.fps()))
             }
-        };
-        Ok((Motion::from_bvh(&file), file.fps()))
+        }
     }
 
     /// The clip a request names, as motion.

@@ -1,4 +1,5 @@
-// The generate view: a prompt, a skeleton, seconds / samples / seed; every sample plays.
+// The generate view: a prompt, a skeleton, seconds / samples / seed and the cleanup; every sample
+// plays with its quality report.
 
 import { postForm } from './api.js';
 import { onSubmit } from './dom.js';
@@ -28,6 +29,7 @@ export function setUpGenerate(skeletons, limits) {
         if (!field.checkValidity()) throw new Error(`${field.labels[0].textContent.trim()}: ${field.validationMessage}`);
         body.append(field.name, field.value);
       }
+      body.append('cleanup', form.cleanup.checked ? 'true' : 'false');
       picker.addTo(body);
       return body;
     },
@@ -40,6 +42,7 @@ export function setUpGenerate(skeletons, limits) {
         title: `Sample ${s.index + 1} on ${who}`,
         download: s.url,
         filename: `anymo-${s.generation_id}-${s.index + 1}.bvh`,
+        quality: s.quality,
       }));
       const took = ((performance.now() - started) / 1000).toFixed(1);
       const [first] = answer;

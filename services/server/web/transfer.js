@@ -52,6 +52,7 @@ export function setUpTransfer(skeletons) {
       const body = new FormData();
       if (!clipSelect.value) throw new Error('Choose the clip to move: find one above.');
       body.append('clip_id', clipSelect.value);
+      body.append('cleanup', form.cleanup.checked ? 'true' : 'false');
       picker.addTo(body);
       return body;
     },
@@ -65,6 +66,7 @@ export function setUpTransfer(skeletons) {
         new Viewer(results, source, { title: `Clip ${clipId} (source)`, download: `/v1/clips/${clipId}/bvh`, filename: `clip-${clipId}.bvh` }),
         new Viewer(results, result.bvh, {
           title: `Clip ${clipId} on ${target}`, download: result.url, filename: `anymo-transfer-${result.generation_id}.bvh`,
+          quality: result.quality,
         }),
       ];
       for (const v of viewers) v.restart();

@@ -7,6 +7,7 @@ import * as THREE from './vendor/three.module.js';
 import { BVHLoader } from './vendor/BVHLoader.js';
 import { OrbitControls } from './vendor/OrbitControls.js';
 import { element } from './dom.js';
+import { qualityList } from './quality.js';
 
 const LIVE_LIMIT = 8;
 const SPEEDS = [0.25, 0.5, 1, 1.5, 2];
@@ -35,7 +36,8 @@ export class Viewer {
   /**
    * @param {HTMLElement} container where the player goes
    * @param {string} text the BVH
-   * @param {{title: string, download?: string, filename?: string, autoplay?: boolean}} options
+   * @param {{title: string, download?: string, filename?: string, autoplay?: boolean, quality?: object}} options
+   *   `quality`: the motion's quality report, listed under the player
    */
   constructor(container, text, options) {
     this.motion = parseBvh(text);
@@ -46,6 +48,10 @@ export class Viewer {
     this.figure = element('figure', { class: 'viewer' });
     this.stage = element('div', { class: 'stage' });
     this.figure.append(this.stage, element('figcaption', {}, options.title), this.controls(options));
+    if (options.quality) {
+      this.figure.dataset.quality = JSON.stringify(options.quality);
+      this.figure.append(qualityList(options.quality));
+    }
     container.append(this.figure);
     this.wake();
   }

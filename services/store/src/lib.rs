@@ -519,6 +519,16 @@ impl Store {
         Ok(Some(row))
     }
 
+    /// The first stored clip (lowest id) on a skeleton, if it has any: a pose of the skeleton in
+    /// real motion, which generation on a stored skeleton writes its motion around.
+    pub async fn first_clip_of_skeleton(&self, skeleton_id: i64) -> Result<Option<i64>, StoreError> {
+        let row = sqlx::query("SELECT MIN(id) FROM clips WHERE skeleton_id = $1")
+            .bind(skeleton_id)
+            .fetch_one(&self.pool)
+            .await?;
+        Ok(row.try_get::<Option<i64>, _>(0)?)
+    }
+
     /// Deletes a clip and its captions; false when there was no such clip.
     pub async fn delete_clip(&self, id: i64) -> Result<bool, StoreError> {
         let mut tx = self.pool.begin().await?;

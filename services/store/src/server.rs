@@ -18,6 +18,8 @@ pub struct NewGeneration<'a> {
     pub fps: f64,
     /// Each sample's BVH text.
     pub samples: &'a [String],
+    /// Each sample's quality report, as a JSON array in sample order.
+    pub quality: serde_json::Value,
 }
 
 /// A stored result (without its samples' bytes).
@@ -35,6 +37,8 @@ pub struct Generation {
     pub fps: f64,
     /// Samples stored.
     pub samples: i64,
+    /// Each sample's quality report (a JSON array; `None` for results stored before reports).
+    pub quality: Option<serde_json::Value>,
     /// When it was made (ms since the epoch).
     pub created_ms: i64,
 }
@@ -137,13 +141,15 @@ impl Store {
     pub async fn insert_generation(&self, generation: &NewGeneration<'_>) -> Result<i64, StoreError> {
         let mut tx = self.pool.begin().await?;
         let id: i64 = sqlx::query(
-            "INSERT INTO generations (kind, request, frames, fps, created_ms) VALUES ($1, $2, $3, $4, $5) RETURNING id",
+            "INSERT INTO generations (kind, request, frames, fps, created_ms, quality) VALUES ($1, $2, $3, $4, $5, $6) \
+             RETURNING id",
         )
         .bind(generation.kind)
         .bind(generation.request.to_string())
         .bind(generation.frames)
         .bind(generation.fps)
         .bind(now_ms())
+        .bind(generation.quality.to_string())
         .fetch_one(&mut *tx)
         .await?
         .try_get(0)?;
@@ -163,7 +169,8 @@ impl Store {
     pub async fn generation(&self, id: i64) -> Result<Option<Generation>, StoreError> {
         let Some(r) = sqlx::query(
             "SELECT g.id, g.kind, g.request, g.frames, g.fps, g.created_ms, \
-             (SELECT COUNT(*) FROM generation_samples s WHERE s.generation_id = g.id) FROM generations g WHERE g.id = $1",
+             (SELECT COUNT(*) FROM generation_samples s WHERE s.generation_id = g.id), g.quality \
+             FROM generations g WHERE g.id = $1",
         )
         .bind(id)
         .fetch_optional(&self.pool)
@@ -179,6 +186,7 @@ impl Store {
             fps: r.try_get(4)?,
             created_ms: r.try_get(5)?,
             samples: r.try_get(6)?,
+            quality: r.try_get::<Option<String>, _>(7)?.map(|q| json(&q)).transpose()?,
         }))
     }
 

@@ -3,6 +3,8 @@
 
 use anyhow::{Context, Result};
 use anymo_models::checkpoint::Checkpoints;
+use anymo_models::quality::QualityReport;
+use anymo_motion::cleanup::Cleanup;
 use anymo_store::Store;
 use anymo_tokenizer::text::SentenceEncoder;
 use std::path::PathBuf;
@@ -76,6 +78,35 @@ pub fn writable_checkpoints(given: Option<&std::path::Path>, option: &str) -> Re
             anymo_paths::CHECKPOINTS_ENV
         )
     })
+}
+
+/// How motion the models decode is finished, and what its quality report compares with
+/// (generate, edit, detokenize and transfer).
+#[derive(clap::Args, Clone)]
+pub struct FinishArgs {
+    /// Give the decoder's motion as it is: no smoothing and no foot planting
+    #[arg(long)]
+    pub no_cleanup: bool,
+    /// The evaluator checkpoint whose card holds real clips' figures per skeleton, and which
+    /// scores generated motion against its prompt
+    #[arg(long, default_value = "evaluator")]
+    pub evaluator: String,
+}
+
+impl FinishArgs {
+    /// The cleanup asked for.
+    pub fn cleanup(&self) -> Option<Cleanup> {
+        (!self.no_cleanup).then(Cleanup::default)
+    }
+}
+
+/// Prints one line of JSON on standard output for each file written: its path and the motion's
+/// quality report.
+pub fn print_reports<'a>(made: impl IntoIterator<Item = (&'a std::path::Path, &'a QualityReport)>) -> Result<()> {
+    for (path, quality) in made {
+        println!("{}", serde_json::json!({ "output": path, "quality": quality }));
+    }
+    Ok(())
 }
 
 /// A single-threaded async runtime for one command.

@@ -10,6 +10,7 @@ use anymo_models::checkpoint::Checkpoint;
 use anymo_models::data::ModelClip;
 use anymo_models::eval::retrieval::Hybrid;
 use anymo_models::eval::{self, by_example, generator, retrieval, tokenizer};
+use anymo_models::quality::REAL_MOTION_KEY;
 use anymo_models::search::SearchModels;
 use anymo_retrieval::benchmark;
 use anymo_tokenizer::dataset::Split;
@@ -101,7 +102,8 @@ struct GeneratorArgs {
     seed: u64,
     #[command(flatten)]
     sampling: SamplingArgs,
-    /// Record the results in each generator's card.
+    /// Record the results in each generator's card, and real clips' figures per skeleton (every
+    /// split) in the evaluator's card, where quality reports find them.
     #[arg(long)]
     record: bool,
     #[command(flatten)]
@@ -165,13 +167,14 @@ fn run_tokenizer(args: TokenizerArgs, command: &str) -> Result<()> {
 fn run_generator(args: GeneratorArgs, command: &str) -> Result<()> {
     let c = &args.common;
     let record_in = c.record_in(args.record)?;
-    let clips = eval::test_clips(&c.manifest, c.limit)?;
-    let test: Vec<&ModelClip> = clips.iter().collect();
+    let (clips, rejected) = eval::clips(&c.manifest, c.limit)?;
+    eprintln!("{} clips ({rejected} rejected by cleaning)", clips.len());
     let mut encoder = CachedEncoder::new(c.store.encoder()?);
     let set = checkpoints(c.dir.as_deref());
     let sampling = args.sampling.sampling();
-    let rows =
-        generator::evaluate_generators(&set, &args.evaluator, &args.models, &test, &mut encoder, sampling, args.seed)?;
+    let (evaluator, models) = (&args.evaluator, &args.models);
+    let (rows, real) =
+        generator::evaluate_generators(&set, evaluator, models, &clips, &mut encoder, sampling, args.seed)?;
     println!("{}", generator::markdown(&rows));
     if let Some(dir) = &record_in {
         for name in &args.models {
@@ -180,8 +183,10 @@ fn run_generator(args: GeneratorArgs, command: &str) -> Result<()> {
                 metrics["generation"] = serde_json::json!({ "rows": mine, "measured_by": command });
             })?;
         }
+        let value = serde_json::to_value(&real)?;
+        eval::record(dir, &args.evaluator, |metrics| metrics[REAL_MOTION_KEY] = value)?;
     }
-    c.write_json(&serde_json::json!({ "rows": rows, "command": command }))
+    c.write_json(&serde_json::json!({ "rows": rows, "real_motion": real, "command": command }))
 }
 
 fn run_retrieval(args: RetrievalArgs, command: &str) -> Result<()> {

@@ -1,14 +1,16 @@
 //! `anymo generate` and `anymo edit`: a prompt to motion on any skeleton, and token-level edits
 //! of a clip (inpainting a span, continuing it, chaining prompts), with the shipped checkpoints.
+//! Decoded motion is cleaned up (`--no-cleanup` to skip), and each sample written is reported on
+//! standard output with its quality report.
 
-use super::context::{CheckpointArgs, StoreArgs};
-use super::tokens::{read_skeleton, write_bvh};
+use super::context::{CheckpointArgs, FinishArgs, StoreArgs, print_reports};
+use super::tokens::{read_target, write_bvh};
 use anyhow::{Context, Result, bail};
 use anymo_generator::Request;
 use anymo_generator::sampling::Sampling;
 use anymo_models::data::MODEL_FPS;
+use anymo_models::quality::Made;
 use anymo_models::studio::Studio;
-use anymo_motion::motion::Motion;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
@@ -29,6 +31,8 @@ pub struct GenerationArgs {
     seed: u64,
     #[command(flatten)]
     sampling: SamplingArgs,
+    #[command(flatten)]
+    finish: FinishArgs,
     #[command(flatten)]
     store: StoreArgs,
 }
@@ -58,7 +62,8 @@ impl SamplingArgs {
 pub struct GenerateArgs {
     /// What the motion shows, in English.
     prompt: String,
-    /// The skeleton to animate: a BVH file (its motion, if any, is ignored).
+    /// The skeleton to animate: a BVH file (the motion is written around the mean pose of its
+    /// frames when it has some, else around its rest pose stood up)
     #[arg(long)]
     skeleton: PathBuf,
     /// Duration in seconds (default: the length the model predicts for the prompt).
@@ -120,7 +125,7 @@ enum Edit {
     /// Prompts one after another on one skeleton, each flowing into the next:
     /// `--prompt "a person walks" --seconds 3 --prompt "a person sits down" --seconds 2`.
     Chain {
-        /// The skeleton to animate: a BVH file.
+        /// The skeleton to animate: a BVH file (posed as for `anymo generate --skeleton`).
         #[arg(long)]
         skeleton: PathBuf,
         /// The prompts, in order.
@@ -141,15 +146,20 @@ fn load(args: &GenerationArgs) -> Result<(Studio, Request)> {
     if args.samples == 0 {
         bail!("--samples must be at least 1");
     }
-    let studio = Studio::load(&args.checkpoints.set().get(&args.model), CachedEncoder::new(args.store.encoder()?))?;
+    let set = args.checkpoints.set();
+    let encoder = CachedEncoder::new(args.store.encoder()?);
+    let mut studio = Studio::load(&set.get(&args.model), &set.get(&args.finish.evaluator), encoder)?;
+    studio.set_cleanup(args.finish.cleanup());
     Ok((studio, Request { steps: None, samples: args.samples, sampling: args.sampling.sampling(), seed: args.seed }))
 }
 
-fn write_all(motions: Vec<Motion>, output: &Path) -> Result<()> {
-    for (k, motion) in motions.iter().enumerate() {
-        write_bvh(motion, &sample_path(output, k))?;
+/// Writes each sample (see [`sample_path`]) and prints its quality report.
+fn write_all(made: Vec<Made>, output: &Path) -> Result<()> {
+    let paths: Vec<PathBuf> = (0..made.len()).map(|k| sample_path(output, k)).collect();
+    for (m, path) in made.iter().zip(&paths) {
+        write_bvh(&m.motion, path)?;
     }
-    Ok(())
+    print_reports(paths.iter().map(PathBuf::as_path).zip(made.iter().map(|m| &m.quality)))
 }
 
 /// Where sample `k` goes: OUT for the first, OUT-2, OUT-3, ... for the others.
@@ -164,7 +174,7 @@ fn sample_path(output: &Path, k: usize) -> PathBuf {
 
 pub fn run_generate(args: GenerateArgs) -> Result<()> {
     let (mut studio, request) = load(&args.generation)?;
-    let target = studio.target(&read_skeleton(&args.skeleton)?)?;
+    let target = studio.target(&read_target(&args.skeleton)?.0)?;
     let seconds = args.seconds.or(args.frames.map(|f| f as f64 / MODEL_FPS));
     write_all(studio.generate_motion(&args.prompt, &target, seconds, &request)?, &args.output)
 }
@@ -189,7 +199,7 @@ pub fn run_edit(args: EditArgs) -> Result<()> {
             }
             let (mut studio, request) = load(&generation)?;
             let parts: Vec<(String, f64)> = prompts.into_iter().zip(seconds).collect();
-            write_all(studio.chain(&read_skeleton(&skeleton)?, &parts, &request)?, &output)
+            write_all(studio.chain(&read_target(&skeleton)?.0, &parts, &request)?, &output)
         }
     }
 }

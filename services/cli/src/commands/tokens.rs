@@ -1,15 +1,16 @@
 //! `anymo tokenize`, `anymo detokenize` and `anymo transfer`: motion to TAT tokens and back, on
 //! the source skeleton or any other, with the shipped checkpoints, at the target file's frame
-//! rate unless `--fps` says otherwise.
+//! rate unless `--fps` says otherwise. Decoded motion is cleaned up (`--no-cleanup` to skip)
+//! and each file written is reported on standard output with its quality report.
 
-use super::context::{CheckpointArgs, StoreArgs};
+use super::context::{CheckpointArgs, FinishArgs, StoreArgs, print_reports};
 use super::input;
 use anyhow::{Context, Result};
 use anymo_models::checkpoint::DEFAULT_TOKENIZER;
+use anymo_models::quality::RealMotion;
 use anymo_models::tokens::{TokenCodec, TokenFile};
 use anymo_motion::bvh;
 use anymo_motion::motion::Motion;
-use anymo_motion::skeleton::Skeleton;
 use anymo_tokenizer::text::CachedEncoder;
 use clap::Parser;
 use std::path::{Path, PathBuf};
@@ -44,7 +45,8 @@ pub struct TokenizeArgs {
 pub struct DetokenizeArgs {
     /// Tokens written by `anymo tokenize`.
     tokens: PathBuf,
-    /// The skeleton to animate: a BVH file (its motion, if any, is ignored).
+    /// The skeleton to animate: a BVH file (the motion is written around the mean pose of its
+    /// frames when it has some, else around its rest pose stood up)
     #[arg(long)]
     skeleton: PathBuf,
     /// The BVH to write.
@@ -53,6 +55,8 @@ pub struct DetokenizeArgs {
     /// Frames per second of the output [default: the skeleton file's]
     #[arg(long)]
     fps: Option<f64>,
+    #[command(flatten)]
+    finish: FinishArgs,
     #[command(flatten)]
     model: ModelArgs,
 }
@@ -74,6 +78,8 @@ pub struct TransferArgs {
     #[arg(long)]
     fps: Option<f64>,
     #[command(flatten)]
+    finish: FinishArgs,
+    #[command(flatten)]
     model: ModelArgs,
 }
 
@@ -81,15 +87,18 @@ fn load(args: &ModelArgs) -> Result<TokenCodec> {
     TokenCodec::load(&args.checkpoints.set().get(&args.model), CachedEncoder::new(args.store.encoder()?))
 }
 
-/// The skeleton of a BVH file (its motion, if any, is not needed).
-pub(super) fn read_skeleton(path: &Path) -> Result<Skeleton> {
-    Ok(read_target(path)?.0.skeleton().clone())
+/// A codec that finishes decoded motion as `finish` asks.
+fn load_finishing(args: &ModelArgs, finish: &FinishArgs) -> Result<TokenCodec> {
+    let mut codec = load(args)?;
+    codec.set_cleanup(finish.cleanup());
+    codec.set_real_motion(RealMotion::of_evaluator(&args.checkpoints.set().get(&finish.evaluator))?);
+    Ok(codec)
 }
 
-/// The skeleton of a BVH file and the file's frame rate, which motion decoded onto it takes.
-/// The target of a detokenize or transfer: its skeleton, with its frames when it has any (a
-/// tokenizer of the reference representation poses the result around them), and its frame rate.
-fn read_target(path: &Path) -> Result<(Motion, f64)> {
+/// The target of a generation, detokenize or transfer: a BVH file's skeleton, with its frames
+/// when it has any (a tokenizer of the reference representation poses the result around them),
+/// and its frame rate.
+pub(super) fn read_target(path: &Path) -> Result<(Motion, f64)> {
     let clip =
         bvh::read_path(path, bvh::ReadOptions::default()).with_context(|| format!("reading {}", path.display()))?;
     Ok((Motion::from_bvh(&clip), 1.0 / clip.frame_time()))
@@ -117,16 +126,18 @@ pub fn run_detokenize(args: DetokenizeArgs) -> Result<()> {
     let text = std::fs::read_to_string(&args.tokens).with_context(|| format!("reading {}", args.tokens.display()))?;
     let file: TokenFile = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a tokens file from `anymo tokenize`", args.tokens.display()))?;
-    let mut codec = load(&args.model)?;
+    let mut codec = load_finishing(&args.model, &args.finish)?;
     let (target, file_fps) = read_target(&args.skeleton)?;
-    let motion = codec.detokenize(&file.tokens, &target, args.fps.unwrap_or(file_fps))?;
-    write_bvh(&motion, &args.output)
+    let made = codec.detokenize(&file.tokens, &target, args.fps.unwrap_or(file_fps))?;
+    write_bvh(&made.motion, &args.output)?;
+    print_reports([(args.output.as_path(), &made.quality)])
 }
 
 pub fn run_transfer(args: TransferArgs) -> Result<()> {
-    let mut codec = load(&args.model)?;
+    let mut codec = load_finishing(&args.model, &args.finish)?;
     let motion = input::read_motion(&args.input, args.animation.as_deref())?;
     let (target, file_fps) = read_target(&args.to)?;
     let moved = codec.transfer(&motion, &target, args.fps.unwrap_or(file_fps))?;
-    write_bvh(&moved, &args.output)
+    write_bvh(&moved.motion, &args.output)?;
+    print_reports([(args.output.as_path(), &moved.quality)])
 }

@@ -1,6 +1,6 @@
 // Drives the anymo web page in headless Chromium, as a user would, and checks that what it shows
-// is real: generated motion plays (the frame counter advances and the canvas's pixels change),
-// the controls and keys work, an API error appears in place, the library searches and previews,
+// is real: generated motion plays (the frame counter advances and the canvas's pixels change)
+// with its quality report beside it, the controls and keys work, an API error appears in place, the library searches and previews,
 // "find similar" and the clip details work, and a transfer plays side by side.
 //
 // node page.mjs --base URL --out DIR --skeleton FILE.bvh --broken FILE.bvh --query WORDS
@@ -170,6 +170,9 @@ try {
   report.generateStatus = await page.locator('#generate-form .status').textContent();
   const first = page.locator('#generate-results .viewer').first();
   await plays(first, 'generate-sample');
+  // Each sample shows its quality report; the test asserts it says the motion is plausible.
+  check(await first.locator('dl.quality dd').count() >= 4, 'the sample shows no quality report');
+  report.generateQuality = JSON.parse(await first.getAttribute('data-quality'));
   await page.screenshot({ path: join(args.out, 'generate.png') });
   const download = await first.locator('a.download').getAttribute('href');
   const bvh = await (await page.request.get(`${args.base}${download}`)).text();

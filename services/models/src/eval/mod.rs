@@ -13,21 +13,12 @@ pub mod tokenizer;
 use crate::checkpoint::Checkpoint;
 use crate::data::{self, ModelClip};
 use anyhow::{Context, Result};
-use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::nn::load_card;
 use std::path::Path;
 
 /// The usable clips of a manifest (at most `limit` per split), with how many cleaning rejected.
 pub fn clips(manifest: &Path, limit: Option<usize>) -> Result<(Vec<ModelClip>, usize)> {
     data::load_manifest(manifest, limit).with_context(|| format!("reading the manifest {}", manifest.display()))
-}
-
-/// The usable clips of the test split (at most `limit` per split of the manifest).
-pub fn test_clips(manifest: &Path, limit: Option<usize>) -> Result<Vec<ModelClip>> {
-    let (clips, rejected) = clips(manifest, limit)?;
-    let test: Vec<ModelClip> = clips.into_iter().filter(|c| c.split == Split::Test).collect();
-    eprintln!("{} test clips ({rejected} rejected by cleaning)", test.len());
-    Ok(test)
 }
 
 /// Updates the figures in the model card of checkpoint `name` in the folder `dir`.

@@ -129,6 +129,16 @@ impl Form {
         self.text(name)?.ok_or_else(|| ApiError::bad_request(format!("the field {name} is missing")))
     }
 
+    /// A true-or-false field (empty counts as absent): `true`/`false` or `1`/`0`.
+    pub fn flag(&self, name: &str) -> Result<Option<bool>, ApiError> {
+        match self.text(name)?.as_deref().map(str::trim) {
+            None | Some("") => Ok(None),
+            Some("true" | "1") => Ok(Some(true)),
+            Some("false" | "0") => Ok(Some(false)),
+            Some(text) => Err(ApiError::bad_request(format!("{name} must be true or false; {text:?} was sent"))),
+        }
+    }
+
     /// A number field (empty counts as absent), refused when it does not parse.
     pub fn number<T: FromStr>(&self, name: &str) -> Result<Option<T>, ApiError> {
         match self.text(name)?.as_deref().map(str::trim) {

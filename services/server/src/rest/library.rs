@@ -423,6 +423,8 @@ pub struct GenerationView {
     pub fps: f64,
     /// Where each sample's BVH is.
     pub samples: Vec<String>,
+    /// Each sample's quality report (absent for results stored before reports).
+    pub quality: Option<Vec<anymo_models::quality::QualityReport>>,
     /// When it was made (ms since the epoch).
     pub created_ms: i64,
 }
@@ -444,6 +446,7 @@ pub async fn get_generation(
         request: g.request,
         frames: g.frames,
         fps: g.fps,
+        quality: g.quality.and_then(|q| serde_json::from_value(q).ok()),
         created_ms: g.created_ms,
     }))
 }

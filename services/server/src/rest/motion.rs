@@ -9,6 +9,7 @@ use crate::auth::{Access, ApiKeys};
 use crate::error::{ApiError, ErrorBody};
 use crate::generation::{self, Edit, Generated, SamplingOptions};
 use crate::motion::{ClipSource, SkeletonSource};
+use anymo_models::quality::QualityReport;
 use anymo_models::tokens::TokenFile;
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderValue, header};
@@ -39,6 +40,8 @@ pub struct GenerateBody {
     pub temperature: Option<f32>,
     /// Draw among the k likeliest tokens only (default 0: all).
     pub top_k: Option<u32>,
+    /// Clean up the decoded motion: light smoothing and planted feet (default true).
+    pub cleanup: Option<bool>,
 }
 
 /// The fields of `POST /v1/edit/inpaint` and `POST /v1/edit/continue`.
@@ -65,6 +68,8 @@ pub struct EditBody {
     pub guidance: Option<f32>,
     /// Temperature, 0 to 10 (default 0.7).
     pub temperature: Option<f32>,
+    /// Clean up the decoded motion: light smoothing and planted feet (default true).
+    pub cleanup: Option<bool>,
 }
 
 /// The fields of `POST /v1/transfer`.
@@ -80,6 +85,8 @@ pub struct TransferBody {
     pub skeleton: Option<String>,
     /// Or a stored skeleton's id.
     pub skeleton_id: Option<i64>,
+    /// Clean up the decoded motion: light smoothing and planted feet (default true).
+    pub cleanup: Option<bool>,
 }
 
 /// The fields of `POST /v1/tokenize`.
@@ -103,6 +110,8 @@ pub struct DetokenizeBody {
     pub skeleton: Option<String>,
     /// Or a stored skeleton's id.
     pub skeleton_id: Option<i64>,
+    /// Clean up the decoded motion: light smoothing and planted feet (default true).
+    pub cleanup: Option<bool>,
 }
 
 /// One sample of a result.
@@ -120,6 +129,9 @@ pub struct Sample {
     pub url: String,
     /// The BVH text.
     pub bvh: String,
+    /// How plausible the motion is: foot skating, foot flight, jitter against real clips of
+    /// the skeleton, and for generated motion its score against the prompt.
+    pub quality: QualityReport,
 }
 
 /// The sampling fields of a form.
@@ -130,6 +142,7 @@ fn sampling(form: &Form) -> Result<SamplingOptions, ApiError> {
         guidance: form.number("guidance")?,
         temperature: form.number("temperature")?,
         top_k: form.number("top_k")?,
+        cleanup: form.flag("cleanup")?,
     })
 }
 
@@ -160,31 +173,38 @@ fn wants_json(headers: &HeaderMap) -> bool {
     headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()).is_some_and(|a| a.contains("application/json"))
 }
 
-/// A result as the client asked: the first sample's BVH text (with the result's id and where
-/// its samples are in headers), or every sample as JSON.
+/// A result as the client asked: the first sample's BVH text (with the result's id, where its
+/// samples are and the first sample's quality report as JSON in headers), or every sample as
+/// JSON.
 pub fn answer(generated: Generated, json: bool) -> Response {
     let location = format!("/v1/generations/{}", generated.id);
     let mut response = if json {
         let samples: Vec<Sample> = generated
             .samples
             .into_iter()
+            .zip(generated.quality)
             .enumerate()
-            .map(|(index, bvh)| Sample {
+            .map(|(index, (bvh, quality))| Sample {
                 index,
                 generation_id: generated.id,
                 frames: generated.frames,
                 fps: generated.fps,
                 url: format!("{location}/samples/{index}"),
                 bvh,
+                quality,
             })
             .collect();
         axum::Json(samples).into_response()
     } else {
         let count = generated.samples.len();
+        let report = generated.quality.first().map(|q| serde_json::to_string(q).expect("a report serialises"));
         let first = generated.samples.into_iter().next().unwrap_or_default();
         let mut response = ([(header::CONTENT_TYPE, "text/plain; charset=utf-8")], first).into_response();
         let headers = response.headers_mut();
         headers.insert("x-samples", count.into());
+        if let Some(value) = report.and_then(|r| HeaderValue::from_str(&r).ok()) {
+            headers.insert("x-quality", value);
+        }
         let disposition = format!("attachment; filename=\"generation-{}.bvh\"", generated.id);
         headers.insert(header::CONTENT_DISPOSITION, HeaderValue::from_str(&disposition).expect("ASCII"));
         response
@@ -203,7 +223,7 @@ pub fn answer(generated: Generated, json: bool) -> Response {
         (GenerateBody = "application/json"),
     )),
     responses(
-        (status = 200, description = "The first sample's BVH text (headers: X-Generation-Id, X-Samples, Location); with Accept: application/json, every sample", content(
+        (status = 200, description = "The first sample's BVH text (headers: X-Generation-Id, X-Samples, Location, and X-Quality: its quality report as JSON); with Accept: application/json, every sample with its report", content(
             (String = "text/plain"),
             (Vec<Sample> = "application/json"),
         )),
@@ -300,7 +320,8 @@ pub async fn extend(State(state): State<Arc<AppState>>, request: Request) -> Res
 pub async fn transfer(State(state): State<Arc<AppState>>, request: Request) -> Result<Response, ApiError> {
     let json = wants_json(request.headers());
     let form = Form::read(request, state.limits.body_bytes).await?;
-    let generated = generation::transfer(&state, clip_source(&form)?, skeleton_source(&form, "skeleton")?).await?;
+    let (clip, to) = (clip_source(&form)?, skeleton_source(&form, "skeleton")?);
+    let generated = generation::transfer(&state, clip, to, form.flag("cleanup")?).await?;
     Ok(answer(generated, json))
 }
 
@@ -341,6 +362,7 @@ pub async fn detokenize(State(state): State<Arc<AppState>>, request: Request) ->
     let tokens = form.bytes("tokens").ok_or_else(|| ApiError::bad_request("the field tokens is missing"))?;
     let tokens: TokenFile = serde_json::from_slice(tokens)
         .map_err(|e| ApiError::bad_request(format!("tokens is not a tokens file from /v1/tokenize: {e}")))?;
-    let generated = generation::detokenize(&state, tokens, skeleton_source(&form, "skeleton")?).await?;
+    let to = skeleton_source(&form, "skeleton")?;
+    let generated = generation::detokenize(&state, tokens, to, form.flag("cleanup")?).await?;
     Ok(answer(generated, json))
 }

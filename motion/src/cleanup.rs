@@ -1,0 +1,341 @@
+//! The cleanup applied to decoded motion before users get it: a light temporal smoothing (no
+//! frame-to-frame jumps), then feet that plant. Planted feet are found from the decoded feet
+//! themselves ([`crate::contact`]); the root is lowered or raised so that planted feet stand on
+//! the floor (y = 0, where the models put it; a rig whose leg ends are not soles, such as a
+//! quadruped whose last joint is its hock, stands them at their own height [`Cleanup::floor`]
+//! above it), and each planted foot is held at one spot for
+//! its whole contact by two-bone IK ([`crate::ik`]), blended in and out over a few frames. A
+//! rig without legs is only smoothed.
+//!
+//! It works on cleaned motion (diameter 1, Y up, translation on the root only), the form the
+//! models decode to.
+
+use crate::contact::{ContactRule, Foot, contacts, find_feet, ground_height, runs};
+use crate::kinematics::{Transform, all_global_transforms, global_transforms};
+use crate::motion::Motion;
+use glam::{Quat, Vec3};
+
+/// How decoded motion is cleaned up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cleanup {
+    /// Standard deviation of the temporal smoothing, in seconds (0: none).
+    pub smoothing: f32,
+    /// When a foot counts as planted.
+    pub rule: ContactRule,
+    /// Seconds over which a planted foot's lock fades in before and out after its contact.
+    pub blend: f32,
+    /// The height (diameters) planted feet's contact points stand at above y = 0: 0 for soles,
+    /// more for leg ends above the ground (real clips' [`crate::quality::Quality::foot_ground`]).
+    pub floor: f32,
+}
+
+impl Default for Cleanup {
+    /// Smoothing of one frame at 30 fps (it removes an alternation between frames and leaves a
+    /// step's shape), and a blend of three frames.
+    fn default() -> Self {
+        Cleanup { smoothing: 1.0 / 30.0, rule: ContactRule::default(), blend: 0.1, floor: 0.0 }
+    }
+}
+
+/// What the cleanup did, for the quality report.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Planting {
+    /// The feet found (0 for a rig without legs: only smoothed).
+    pub feet: usize,
+    /// The fraction of foot-frames planted.
+    pub planted: f32,
+    /// The largest height change of the root, in diameters.
+    pub root_shift: f32,
+}
+
+impl Cleanup {
+    /// The motion smoothed and with its feet planted, and what was done.
+    pub fn apply(&self, motion: &Motion) -> (Motion, Planting) {
+        let smoothed = smooth(motion, self.smoothing * motion.fps() as f32);
+        let feet = find_feet(&smoothed);
+        if feet.is_empty() || smoothed.frames() < 2 {
+            return (smoothed, Planting::default());
+        }
+        let skeleton = smoothed.skeleton().clone();
+        let (n, frames) = (skeleton.len(), smoothed.frames());
+        let globals = all_global_transforms(&smoothed);
+        let points: Vec<Vec3> = (0..frames)
+            .flat_map(|f| {
+                feet.iter().map(|foot| foot.point(&skeleton, &globals[f * n..(f + 1) * n])).collect::<Vec<_>>()
+            })
+            .collect();
+        let scale = skeleton.diameter();
+        let ground = ground_height(&points, feet.len()) / scale;
+        let unit_points: Vec<Vec3> = points.iter().map(|p| *p / scale).collect();
+        let planted = contacts(&unit_points, feet.len(), smoothed.fps() as f32, ground, &self.rule);
+        let floor = self.floor * scale;
+        let shift = root_shift(&points, &planted, feet.len(), floor, 2.0 * motion.fps() as f32 / 30.0);
+        let (_, frame_time, mut rotations, mut translations) = smoothed.into_parts();
+        for (f, s) in shift.iter().enumerate() {
+            translations[f * n].y += s;
+        }
+        let blend = (self.blend * motion.fps() as f32).round() as usize;
+        let locks: Vec<Vec<Option<(Vec3, f32)>>> =
+            planted.iter().enumerate().map(|(k, p)| locks(&points, feet.len(), k, p, blend, floor)).collect();
+        let mut pose = Vec::with_capacity(n);
+        for f in 0..frames {
+            let (r, t) = (&mut rotations[f * n..(f + 1) * n], &translations[f * n..(f + 1) * n]);
+            for (k, foot) in feet.iter().enumerate() {
+                let Some((spot, weight)) = locks[k][f] else { continue };
+                global_transforms(&skeleton, r, t, &mut pose);
+                plant(foot, &skeleton, r, &pose, spot, weight);
+            }
+        }
+        let report = Planting {
+            feet: feet.len(),
+            planted: planted.iter().flatten().filter(|&&p| p).count() as f32 / (frames * feet.len()) as f32,
+            root_shift: shift.iter().fold(0.0f32, |m, s| m.max(s.abs())) / scale,
+        };
+        let motion = Motion::new(skeleton, frame_time, rotations, translations).expect("shapes unchanged");
+        (motion, report)
+    }
+}
+
+/// Moves one foot's contact point `weight` of the way to `spot` by turning its chain.
+fn plant(
+    foot: &Foot,
+    skeleton: &crate::skeleton::Skeleton,
+    rotations: &mut [Quat],
+    pose: &[Transform],
+    spot: Vec3,
+    weight: f32,
+) {
+    let point = foot.point(skeleton, pose);
+    let target = point.lerp(spot, weight);
+    let ankle = foot.chain.ankle_position(skeleton, pose) + (target - point);
+    foot.chain.reach(skeleton, rotations, pose, ankle, pose[0].rotation * Vec3::Z);
+}
+
+/// For every frame, where the root must move up or down so that the lowest planted foot stands
+/// at `floor`: measured at frames with a planted foot, interpolated between them, held at the
+/// ends, then smoothed (standard deviation `sigma` frames). Zero when no foot is ever planted.
+fn root_shift(points: &[Vec3], planted: &[Vec<bool>], feet: usize, floor: f32, sigma: f32) -> Vec<f32> {
+    let frames = points.len() / feet;
+    let measured: Vec<Option<f32>> = (0..frames)
+        .map(|f| (0..feet).filter(|&k| planted[k][f]).map(|k| floor - points[f * feet + k].y).reduce(f32::max))
+        .collect();
+    let known: Vec<(usize, f32)> = measured.iter().enumerate().filter_map(|(f, m)| m.map(|v| (f, v))).collect();
+    if known.is_empty() {
+        return vec![0.0; frames];
+    }
+    let filled: Vec<f32> = (0..frames)
+        .map(|f| {
+            let after = known.partition_point(|k| k.0 < f);
+            match (after.checked_sub(1).map(|i| known[i]), known.get(after)) {
+                (_, Some(&(g, v))) if g == f => v,
+                (Some((a, va)), Some(&(b, vb))) => va + (vb - va) * (f - a) as f32 / (b - a) as f32,
+                (Some((_, v)), None) | (None, Some(&(_, v))) => v,
+                (None, None) => 0.0,
+            }
+        })
+        .collect();
+    gaussian(&filled, sigma)
+}
+
+/// For one foot, every frame's lock: the spot it is held at (the mean of its contact points
+/// over the contact, at `floor`) and how strongly (1 inside the contact, fading over `blend`
+/// frames on either side), or `None` where it moves freely.
+fn locks(
+    points: &[Vec3],
+    feet: usize,
+    k: usize,
+    planted: &[bool],
+    blend: usize,
+    floor: f32,
+) -> Vec<Option<(Vec3, f32)>> {
+    let frames = planted.len();
+    let mut out: Vec<Option<(Vec3, f32)>> = vec![None; frames];
+    for run in runs(planted) {
+        let mean = run.clone().map(|f| points[f * feet + k]).sum::<Vec3>() / run.len() as f32;
+        let spot = mean.with_y(floor);
+        let first = run.start.saturating_sub(blend);
+        let last = (run.end + blend).min(frames);
+        for (f, slot) in out.iter_mut().enumerate().take(last).skip(first) {
+            let distance = if f < run.start { run.start - f } else { (f + 1).saturating_sub(run.end) };
+            let weight = smoothstep(1.0 - distance as f32 / (blend + 1) as f32);
+            if slot.is_none_or(|(_, w)| w < weight) {
+                *slot = Some((spot, weight));
+            }
+        }
+    }
+    out
+}
+
+fn smoothstep(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
+/// A Gaussian filter over a sequence (standard deviation `sigma` samples, the ends held).
+fn gaussian(values: &[f32], sigma: f32) -> Vec<f32> {
+    let weights = kernel(sigma);
+    let reach = weights.len() / 2;
+    let last = values.len().saturating_sub(1) as isize;
+    (0..values.len())
+        .map(|f| {
+            weights
+                .iter()
+                .enumerate()
+                .map(|(i, w)| w * values[(f as isize + i as isize - reach as isize).clamp(0, last) as usize])
+                .sum()
+        })
+        .collect()
+}
+
+/// Normalised Gaussian weights over +-3 sigma (a single 1 for sigma near zero).
+fn kernel(sigma: f32) -> Vec<f32> {
+    if sigma < 0.05 {
+        return vec![1.0];
+    }
+    let reach = (3.0 * sigma).ceil() as isize;
+    let raw: Vec<f32> = (-reach..=reach).map(|i| (-0.5 * (i as f32 / sigma).powi(2)).exp()).collect();
+    let total: f32 = raw.iter().sum();
+    raw.into_iter().map(|w| w / total).collect()
+}
+
+/// Every joint's rotation and the root's translation filtered over time with a Gaussian of
+/// `sigma` frames. Rotations are averaged as quaternions on one hemisphere and normalised,
+/// which for neighbouring frames is the rotation average to second order.
+pub fn smooth(motion: &Motion, sigma: f32) -> Motion {
+    let weights = kernel(sigma);
+    if weights.len() == 1 || motion.frames() < 2 {
+        return motion.clone();
+    }
+    let (skeleton, frame_time, mut rotations, mut translations) = motion.clone().into_parts();
+    let (n, frames) = (skeleton.len(), motion.frames());
+    let reach = weights.len() / 2;
+    let at = |f: usize, i: usize| (f as isize + i as isize - reach as isize).clamp(0, frames as isize - 1) as usize;
+    let roots: Vec<Vec3> = (0..frames).map(|f| translations[f * n]).collect();
+    for f in 0..frames {
+        translations[f * n] = weights.iter().enumerate().map(|(i, w)| *w * roots[at(f, i)]).sum();
+    }
+    for j in 0..n {
+        let mut series: Vec<Quat> = (0..frames).map(|f| rotations[f * n + j]).collect();
+        for f in 1..frames {
+            if series[f].dot(series[f - 1]) < 0.0 {
+                series[f] = -series[f];
+            }
+        }
+        for f in 0..frames {
+            let sum = weights
+                .iter()
+                .enumerate()
+                .fold(glam::Vec4::ZERO, |s, (i, w)| s + *w * glam::Vec4::from(series[at(f, i)]));
+            rotations[f * n + j] = Quat::from_vec4(sum).normalize();
+        }
+    }
+    Motion::new(skeleton, frame_time, rotations, translations).expect("shapes unchanged")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::tests::biped;
+    use crate::kinematics::all_joint_positions;
+
+    /// The biped walking in place badly: floating 0.08 above the floor, its left foot sliding
+    /// forward 0.02 per frame while low, its knees bending and straightening, for 30 frames.
+    fn floating_slide() -> Motion {
+        let stand = biped("Leg", "Foot");
+        let (skeleton, _, _, _) = stand.clone().into_parts();
+        let n = skeleton.len();
+        let (mut rotations, mut translations) = (Vec::new(), Vec::new());
+        for f in 0..30 {
+            let phase = f as f32 / 30.0 * std::f32::consts::TAU;
+            for j in 0..n {
+                let r = match skeleton.joint(j).name.as_str() {
+                    // The left leg swings forward and back while its foot stays low: it slides.
+                    "LeftUpLeg" => Quat::from_rotation_x(-0.3 * phase.sin()),
+                    "RightUpLeg" => Quat::from_rotation_x(-0.2),
+                    "RightLeg" => Quat::from_rotation_x(0.4),
+                    _ => Quat::IDENTITY,
+                };
+                rotations.push(r);
+                translations.push(if j == 0 { Vec3::new(0.0, 0.95 + 0.08, 0.0) } else { skeleton.joint(j).offset });
+            }
+        }
+        Motion::new(skeleton, 1.0 / 30.0, rotations, translations).unwrap()
+    }
+
+    #[test]
+    fn planted_feet_stand_on_the_floor_and_stop_sliding() {
+        let motion = floating_slide();
+        let diameter = motion.skeleton().diameter();
+        let cleanup = Cleanup { smoothing: 0.0, ..Cleanup::default() };
+        let (planted, report) = cleanup.apply(&motion);
+        assert_eq!(report.feet, 2);
+        let feet = find_feet(&planted);
+        let point = |m: &Motion, f: usize, k: usize| {
+            let globals = all_global_transforms(m);
+            let n = m.skeleton().len();
+            feet[k].point(m.skeleton(), &globals[f * n..(f + 1) * n])
+        };
+        // The right foot (bent leg, still) is planted the whole clip, on the floor, not at 0.08.
+        for f in 0..30 {
+            let p = point(&planted, f, 1);
+            assert!(p.y.abs() < 2e-3 * diameter, "frame {f}: {p}");
+        }
+        // Before: the left toe's lowest frames slide; after, its planted frames hold one spot.
+        let before: Vec<f32> = (0..30).map(|f| point(&motion, f, 0).z).collect();
+        let spread =
+            |zs: &[f32]| zs.iter().cloned().fold(f32::MIN, f32::max) - zs.iter().cloned().fold(f32::MAX, f32::min);
+        assert!(spread(&before) > 0.1 * diameter);
+        let left = contacts(
+            &(0..30).map(|f| point(&planted, f, 0) / diameter).collect::<Vec<_>>(),
+            1,
+            30.0,
+            0.0,
+            &ContactRule::default(),
+        );
+        for run in runs(&left[0]).into_iter().filter(|r| r.len() > 6) {
+            let inner: Vec<f32> = (run.start + 3..run.end - 3).map(|f| point(&planted, f, 0).z).collect();
+            assert!(spread(&inner) < 1e-3 * diameter, "{run:?}: {inner:?}");
+        }
+        // Nothing but the legs and the root's height changed.
+        for f in 0..30 {
+            let (a, b) = (all_joint_positions(&motion.slice(f, 1)), all_joint_positions(&planted.slice(f, 1)));
+            let shift = b[0].y - a[0].y;
+            assert!((b[8].y - a[8].y - shift).abs() < 1e-5 && b[8].x == a[8].x, "the head follows the root only");
+        }
+    }
+
+    #[test]
+    fn smoothing_removes_an_alternation_and_keeps_a_steady_turn() {
+        let stand = biped("Leg", "Foot");
+        let (skeleton, _, _, _) = stand.into_parts();
+        let n = skeleton.len();
+        let (mut rotations, mut translations) = (Vec::new(), Vec::new());
+        for f in 0..20 {
+            for j in 0..n {
+                // The head turns steadily; the spine flickers by +-0.1 rad every other frame.
+                let r = match j {
+                    8 => Quat::from_rotation_y(0.05 * f as f32),
+                    7 => Quat::from_rotation_x(if f % 2 == 0 { 0.1 } else { -0.1 }),
+                    _ => Quat::IDENTITY,
+                };
+                rotations.push(r);
+                translations.push(if j == 0 { Vec3::new(0.0, 0.95, 0.0) } else { skeleton.joint(j).offset });
+            }
+        }
+        let motion = Motion::new(skeleton, 1.0 / 30.0, rotations, translations).unwrap();
+        let smoothed = smooth(&motion, 1.0);
+        for f in 4..16 {
+            let head = smoothed.rotations(f)[8];
+            assert!(head.angle_between(Quat::from_rotation_y(0.05 * f as f32)) < 1e-3, "a steady turn stays");
+            assert!(smoothed.rotations(f)[7].angle_between(Quat::IDENTITY) < 0.03, "the flicker is gone");
+        }
+    }
+
+    #[test]
+    fn a_rig_without_legs_is_only_smoothed() {
+        let motion = biped("Fin", "Flap");
+        let (out, report) = Cleanup { smoothing: 0.0, ..Cleanup::default() }.apply(&motion);
+        assert_eq!(report, Planting::default());
+        assert_eq!(out.all_translations(), motion.all_translations());
+    }
+}
