@@ -37,7 +37,7 @@ fn child(data: &Path, threads: &str) {
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints");
     let mut studio = Studio::load(
         &Checkpoint::in_dir(&shipped, "generator"),
-        &Checkpoint::in_dir(&shipped, "evaluator"),
+        Some(&Checkpoint::in_dir(&shipped, "evaluator")),
         CachedEncoder::new(encoder),
     )
     .expect("the shipped generator");

@@ -143,6 +143,15 @@ impl Checkpoint {
         self.set.get(name)
     }
 
+    /// Whether the set has this checkpoint (its weights and its card).
+    pub fn exists(&self) -> bool {
+        match (&self.set, self.files()) {
+            (Checkpoints::BuiltIn(all), _) => self.built_in(all).is_ok(),
+            (Checkpoints::Dir(_), Some((weights, card))) => weights.is_file() && card.is_file(),
+            (Checkpoints::Dir(_), None) => false,
+        }
+    }
+
     /// The weights' and card's paths, for a checkpoint in a folder (training writes there).
     pub fn files(&self) -> Option<(PathBuf, PathBuf)> {
         match &self.set {

@@ -93,15 +93,21 @@ pub struct Studio {
 
 impl Studio {
     /// Loads a generator checkpoint with the tokenizer it was trained on, and the evaluator
-    /// `evaluator` for the quality reports (its prompt score only when it reads the same
-    /// tokenizer). Decoded motion gets the default cleanup; see [`Studio::set_cleanup`].
-    pub fn load(generator: &Checkpoint, evaluator: &Checkpoint, encoder: CachedEncoder) -> Result<Studio> {
+    /// `evaluator`, if any, for the quality reports (the real clips' figures its card records,
+    /// and its prompt score when it reads the same tokenizer). Decoded motion gets the default
+    /// cleanup; see [`Studio::set_cleanup`].
+    pub fn load(generator: &Checkpoint, evaluator: Option<&Checkpoint>, encoder: CachedEncoder) -> Result<Studio> {
         let (model, card) = generation::load_generator(generator)?;
         let mut encoder = encoder;
         let tat = generator.load_tat_of(&card, &mut encoder)?;
-        let (judge, judge_card) = generation::load_evaluator(evaluator)?;
-        let real = RealMotion::from_card_metrics(&judge_card.metrics);
-        let judge = (judge_card.config.trained_on == card.config.trained_on).then_some(judge);
+        let (judge, real) = match evaluator {
+            Some(evaluator) => {
+                let (judge, judge_card) = generation::load_evaluator(evaluator)?;
+                let real = RealMotion::from_card_metrics(&judge_card.metrics);
+                ((judge_card.config.trained_on == card.config.trained_on).then_some(judge), real)
+            }
+            None => (None, RealMotion::default()),
+        };
         Ok(Studio { tat, generator: model, encoder, judge, real, cleanup: Some(Cleanup::default()) })
     }
 

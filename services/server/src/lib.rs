@@ -124,7 +124,7 @@ impl Server {
             let c = config.clone();
             let models = tokio::task::spawn_blocking(move || -> Result<GenerationModels> {
                 let evaluator = c.checkpoints.get(&c.evaluator);
-                let studio = Studio::load(&c.checkpoints.get(&c.generator), &evaluator, encoder(&c)?)?;
+                let studio = Studio::load(&c.checkpoints.get(&c.generator), Some(&evaluator), encoder(&c)?)?;
                 let mut codec = TokenCodec::load(&c.checkpoints.get(&c.tokenizer), encoder(&c)?)?;
                 codec.set_real_motion(RealMotion::of_evaluator(&evaluator)?);
                 Ok(GenerationModels::new(studio, codec))

@@ -2,7 +2,7 @@
 //! `anymo_paths` resolves them, so the binary works from any folder), and a runtime.
 
 use anyhow::{Context, Result};
-use anymo_models::checkpoint::Checkpoints;
+use anymo_models::checkpoint::{Checkpoint, Checkpoints};
 use anymo_models::quality::QualityReport;
 use anymo_motion::cleanup::Cleanup;
 use anymo_store::Store;
@@ -88,15 +88,25 @@ pub struct FinishArgs {
     #[arg(long)]
     pub no_cleanup: bool,
     /// The evaluator checkpoint whose card holds real clips' figures per skeleton, and which
-    /// scores generated motion against its prompt
-    #[arg(long, default_value = "evaluator")]
-    pub evaluator: String,
+    /// scores generated motion against its prompt [default: evaluator, when the checkpoints
+    /// have one; without it the reports have no real clips' figures and no prompt score]
+    #[arg(long)]
+    pub evaluator: Option<String>,
 }
 
 impl FinishArgs {
     /// The cleanup asked for.
     pub fn cleanup(&self) -> Option<Cleanup> {
         (!self.no_cleanup).then(Cleanup::default)
+    }
+
+    /// The evaluator to report with: the one asked for (loading it says if it is missing), or
+    /// the set's `evaluator` when there is one.
+    pub fn evaluator(&self, set: &Checkpoints) -> Option<Checkpoint> {
+        match &self.evaluator {
+            Some(name) => Some(set.get(name)),
+            None => Some(set.get("evaluator")).filter(Checkpoint::exists),
+        }
     }
 }
 

@@ -148,7 +148,7 @@ fn load(args: &GenerationArgs) -> Result<(Studio, Request)> {
     }
     let set = args.checkpoints.set();
     let encoder = CachedEncoder::new(args.store.encoder()?);
-    let mut studio = Studio::load(&set.get(&args.model), &set.get(&args.finish.evaluator), encoder)?;
+    let mut studio = Studio::load(&set.get(&args.model), args.finish.evaluator(&set).as_ref(), encoder)?;
     studio.set_cleanup(args.finish.cleanup());
     Ok((studio, Request { steps: None, samples: args.samples, sampling: args.sampling.sampling(), seed: args.seed }))
 }

@@ -91,7 +91,9 @@ fn load(args: &ModelArgs) -> Result<TokenCodec> {
 fn load_finishing(args: &ModelArgs, finish: &FinishArgs) -> Result<TokenCodec> {
     let mut codec = load(args)?;
     codec.set_cleanup(finish.cleanup());
-    codec.set_real_motion(RealMotion::of_evaluator(&args.checkpoints.set().get(&finish.evaluator))?);
+    if let Some(evaluator) = finish.evaluator(&args.checkpoints.set()) {
+        codec.set_real_motion(RealMotion::of_evaluator(&evaluator)?);
+    }
     Ok(codec)
 }
 

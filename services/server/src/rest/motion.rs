@@ -197,13 +197,14 @@ pub fn answer(generated: Generated, json: bool) -> Response {
         axum::Json(samples).into_response()
     } else {
         let count = generated.samples.len();
-        let report = generated.quality.first().map(|q| serde_json::to_string(q).expect("a report serialises"));
+        let report =
+            generated.quality.first().map(|q| ascii_json(&serde_json::to_string(q).expect("a report serialises")));
         let first = generated.samples.into_iter().next().unwrap_or_default();
         let mut response = ([(header::CONTENT_TYPE, "text/plain; charset=utf-8")], first).into_response();
         let headers = response.headers_mut();
         headers.insert("x-samples", count.into());
-        if let Some(value) = report.and_then(|r| HeaderValue::from_str(&r).ok()) {
-            headers.insert("x-quality", value);
+        if let Some(report) = report {
+            headers.insert("x-quality", HeaderValue::from_str(&report).expect("ASCII JSON"));
         }
         let disposition = format!("attachment; filename=\"generation-{}.bvh\"", generated.id);
         headers.insert(header::CONTENT_DISPOSITION, HeaderValue::from_str(&disposition).expect("ASCII"));
@@ -213,6 +214,23 @@ pub fn answer(generated: Generated, json: bool) -> Response {
     headers.insert("x-generation-id", generated.id.into());
     headers.insert(header::LOCATION, HeaderValue::from_str(&location).expect("ASCII"));
     response
+}
+
+/// JSON text with every character outside ASCII written as a `\u` escape (a surrogate pair
+/// beyond the first plane), so it can travel in a header: JSON parsers read it as the same text.
+fn ascii_json(json: &str) -> String {
+    let mut out = String::with_capacity(json.len());
+    for c in json.chars() {
+        if c.is_ascii() {
+            out.push(c);
+        } else {
+            let mut units = [0u16; 2];
+            for unit in c.encode_utf16(&mut units) {
+                out.push_str(&format!("\\u{unit:04x}"));
+            }
+        }
+    }
+    out
 }
 
 /// Motion from a prompt on any skeleton.
@@ -365,4 +383,18 @@ pub async fn detokenize(State(state): State<Arc<AppState>>, request: Request) ->
     let to = skeleton_source(&form, "skeleton")?;
     let generated = generation::detokenize(&state, tokens, to, form.flag("cleanup")?).await?;
     Ok(answer(generated, json))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_in_a_header_is_ascii_and_reads_back_the_same() {
+        let value = serde_json::json!({ "subject": "chien élégant 🐕", "jitter": 1.5 });
+        let text = ascii_json(&value.to_string());
+        assert!(text.is_ascii() && HeaderValue::from_str(&text).is_ok(), "{text}");
+        assert!(text.contains("\\u00e9") && text.contains("\\ud83d\\udc15"), "{text}");
+        assert_eq!(serde_json::from_str::<serde_json::Value>(&text).unwrap(), value);
+    }
 }
