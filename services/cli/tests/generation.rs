@@ -243,10 +243,12 @@ fn shipped_generation_stands_plants_its_feet_and_says_how_good_it_is() {
     let ratio = clean["jitter"].as_f64().unwrap() / clean["real"]["jitter"].as_f64().unwrap();
     assert!((clean["jitter_ratio"].as_f64().unwrap() - ratio).abs() < 1e-4, "{clean}");
     assert!(clean["text_similarity"].as_f64().is_some_and(|t| (-1.0..=1.0).contains(&t)), "{clean}");
-    // Without the cleanup: the same motion as decoded, which shakes more and goes through the floor.
-    let (raw, _) = generate(&walk, "a person walks forward", "raw.bvh", &["--no-cleanup"]);
+    // Without the cleanup (or the prompt score): the same motion as decoded, which shakes more
+    // and goes through the floor.
+    let (raw, _) = generate(&walk, "a person walks forward", "raw.bvh", &["--no-cleanup", "--no-score"]);
     let raw = report(&raw);
     assert_eq!((raw["cleaned_up"].as_bool(), raw["planted"].as_f64()), (Some(false), Some(0.0)), "{raw}");
+    assert!(raw["text_similarity"].is_null() && raw["real"].is_object(), "--no-score: {raw}");
     assert!(clean["jitter"].as_f64() < raw["jitter"].as_f64(), "{clean} against {raw}");
     assert!(clean["ground_penetration"].as_f64() < raw["ground_penetration"].as_f64(), "{clean} against {raw}");
 

@@ -174,6 +174,11 @@ fn rest_and_grpc_serve_every_capability() {
         let horse_bvh =
             client.get(format!("{base}/v1/skeletons/{horse_id}/bvh")).send().await.unwrap().bytes().await.unwrap();
         let body =
+            serde_json::json!({ "prompt": "a horse gallops", "seconds": 1, "skeleton_id": horse_id, "score": false });
+        let response = client.post(format!("{base}/v1/generate")).json(&body).send().await.unwrap();
+        let quality: Value = serde_json::from_str(response.headers()["x-quality"].to_str().unwrap()).unwrap();
+        assert!(quality["text_similarity"].is_null() && quality["jitter"].as_f64().is_some(), "score=false: {quality}");
+        let body =
             serde_json::json!({ "prompt": "a horse gallops", "seconds": 1.5, "skeleton_id": horse_id, "seed": 3 });
         let response = client.post(format!("{base}/v1/generate")).json(&body).send().await.unwrap();
         assert_eq!(response.status(), 200);

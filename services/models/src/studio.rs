@@ -89,6 +89,8 @@ pub struct Studio {
     real: RealMotion,
     /// The cleanup decoded motion gets (`None`: none).
     cleanup: Option<Cleanup>,
+    /// Whether quality reports carry the prompt score (one pass of the tokenizer's encoder).
+    scoring: bool,
 }
 
 impl Studio {
@@ -108,12 +110,18 @@ impl Studio {
             }
             None => (None, RealMotion::default()),
         };
-        Ok(Studio { tat, generator: model, encoder, judge, real, cleanup: Some(Cleanup::default()) })
+        Ok(Studio { tat, generator: model, encoder, judge, real, cleanup: Some(Cleanup::default()), scoring: true })
     }
 
     /// Sets the cleanup decoded motion gets (`None` gives the decoder's output as it is).
     pub fn set_cleanup(&mut self, cleanup: Option<Cleanup>) {
         self.cleanup = cleanup;
+    }
+
+    /// Sets whether quality reports carry the prompt score, which costs one pass of the
+    /// tokenizer's encoder over the motion (on by default).
+    pub fn set_scoring(&mut self, scoring: bool) {
+        self.scoring = scoring;
     }
 
     /// Frames one token step covers.
@@ -267,7 +275,7 @@ impl Studio {
     /// The cosine of the prompt and a motion (cleaned form, on the target) in the evaluator's
     /// space, when the evaluator reads this generator's tokenizer.
     fn text_similarity(&mut self, prompt: &str, motion: &Motion, target: &Target) -> Result<Option<f32>> {
-        let Some(judge) = &self.judge else { return Ok(None) };
+        let Some(judge) = self.judge.as_ref().filter(|_| self.scoring) else { return Ok(None) };
         let encoded = encode_whole(&mut self.tat, &target.graph, &target.basis.enter(motion))?;
         let width = judge.config().max_tokens * judge.config().latent_dim;
         let motion = judge.embed_one(&encoded.latent[..encoded.latent.len().min(width)])?;

@@ -91,6 +91,9 @@ pub struct SamplingOptions {
     pub top_k: Option<usize>,
     /// Clean up the decoded motion: smoothing and planted feet (default true).
     pub cleanup: Option<bool>,
+    /// Score the motion against its prompt in its quality report (default true; it costs one
+    /// pass of the tokenizer's encoder).
+    pub score: Option<bool>,
 }
 
 impl SamplingOptions {
@@ -200,12 +203,13 @@ pub async fn generate(
     let record = serde_json::json!({
         "prompt": prompt, "seconds": seconds, "skeleton": describe(&skeleton), "sampling": sampling,
     });
-    let cleanup = sampling.cleanup();
+    let (cleanup, score) = (sampling.cleanup(), sampling.score.unwrap_or(true));
     let made = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
             let target = m.target(&target)?;
             m.studio.set_cleanup(cleanup);
+            m.studio.set_scoring(score);
             m.studio.generate_motion(&prompt, &target, seconds, &request).map_err(ApiError::from_model)
         })
         .await?;
@@ -252,11 +256,12 @@ pub async fn edit(
         }
     };
     let motion = state.clip(&clip).await?;
-    let cleanup = sampling.cleanup();
+    let (cleanup, score) = (sampling.cleanup(), sampling.score.unwrap_or(true));
     let made = state
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
             m.studio.set_cleanup(cleanup);
+            m.studio.set_scoring(score);
             let made = match edit {
                 Edit::Inpaint { from, to } => m.studio.inpaint(&motion, &prompt, (from, to), &request),
                 Edit::Continue { seconds } => m.studio.extend(&motion, &prompt, seconds, &request),

@@ -47,6 +47,7 @@ fn sampling(options: Option<proto::Sampling>) -> SamplingOptions {
         temperature: o.temperature,
         top_k: o.top_k.map(|k| k as usize),
         cleanup: o.cleanup,
+        score: o.score,
     }
 }
 

@@ -87,6 +87,10 @@ pub struct FinishArgs {
     /// Give the decoder's motion as it is: no smoothing and no foot planting
     #[arg(long)]
     pub no_cleanup: bool,
+    /// Leave the prompt score out of the quality report of generated motion (it costs one pass
+    /// of the tokenizer's encoder over the motion)
+    #[arg(long)]
+    pub no_score: bool,
     /// The evaluator checkpoint whose card holds real clips' figures per skeleton, and which
     /// scores generated motion against its prompt [default: evaluator, when the checkpoints
     /// have one; without it the reports have no real clips' figures and no prompt score]

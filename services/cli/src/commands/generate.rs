@@ -150,6 +150,7 @@ fn load(args: &GenerationArgs) -> Result<(Studio, Request)> {
     let encoder = CachedEncoder::new(args.store.encoder()?);
     let mut studio = Studio::load(&set.get(&args.model), args.finish.evaluator(&set).as_ref(), encoder)?;
     studio.set_cleanup(args.finish.cleanup());
+    studio.set_scoring(!args.finish.no_score);
     Ok((studio, Request { steps: None, samples: args.samples, sampling: args.sampling.sampling(), seed: args.seed }))
 }
 

@@ -42,6 +42,9 @@ pub struct GenerateBody {
     pub top_k: Option<u32>,
     /// Clean up the decoded motion: light smoothing and planted feet (default true).
     pub cleanup: Option<bool>,
+    /// Score the motion against the prompt in its quality report (default true; it costs one
+    /// pass of the tokenizer's encoder).
+    pub score: Option<bool>,
 }
 
 /// The fields of `POST /v1/edit/inpaint` and `POST /v1/edit/continue`.
@@ -70,6 +73,9 @@ pub struct EditBody {
     pub temperature: Option<f32>,
     /// Clean up the decoded motion: light smoothing and planted feet (default true).
     pub cleanup: Option<bool>,
+    /// Score the motion against the prompt in its quality report (default true; it costs one
+    /// pass of the tokenizer's encoder).
+    pub score: Option<bool>,
 }
 
 /// The fields of `POST /v1/transfer`.
@@ -143,6 +149,7 @@ fn sampling(form: &Form) -> Result<SamplingOptions, ApiError> {
         temperature: form.number("temperature")?,
         top_k: form.number("top_k")?,
         cleanup: form.flag("cleanup")?,
+        score: form.flag("score")?,
     })
 }
 
