@@ -1,11 +1,9 @@
 //! The cleanup applied to decoded motion before users get it: a light temporal smoothing (no
 //! frame-to-frame jumps), then feet that plant. Planted feet are found from the decoded feet
 //! themselves ([`crate::contact`]); the root is lowered or raised so that planted feet stand on
-//! the floor (y = 0, where the models put it; a rig whose leg ends are not soles, such as a
-//! quadruped whose last joint is its hock, stands them at their own height [`Cleanup::floor`]
-//! above it), and each planted foot is held at one spot for
-//! its whole contact by two-bone IK ([`crate::ik`]), blended in and out over a few frames. A
-//! rig without legs is only smoothed.
+//! the floor ([`Cleanup::floor`]: y = 0 for soles, higher for a rig whose leg ends are hocks),
+//! and each planted foot is held at one spot for its whole contact by two-bone IK
+//! ([`crate::ik`]), blended in and out over a few frames. A rig without legs is only smoothed.
 //!
 //! It works on cleaned motion (diameter 1, Y up, translation on the root only), the form the
 //! models decode to.
@@ -44,8 +42,6 @@ pub struct Planting {
     pub feet: usize,
     /// The fraction of foot-frames planted.
     pub planted: f32,
-    /// The largest height change of the root, in diameters.
-    pub root_shift: f32,
 }
 
 impl Cleanup {
@@ -89,7 +85,6 @@ impl Cleanup {
         let report = Planting {
             feet: feet.len(),
             planted: planted.iter().flatten().filter(|&&p| p).count() as f32 / (frames * feet.len()) as f32,
-            root_shift: shift.iter().fold(0.0f32, |m, s| m.max(s.abs())) / scale,
         };
         let motion = Motion::new(skeleton, frame_time, rotations, translations).expect("shapes unchanged");
         (motion, report)

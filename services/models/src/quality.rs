@@ -49,9 +49,8 @@ pub struct QualityReport {
     pub real: Option<SkeletonReference>,
     /// `jitter` over the real clips' jitter (1 is as smooth as real motion).
     pub jitter_ratio: Option<f32>,
-    /// Cosine similarity of the prompt and the motion in the evaluator's space (-1 to 1; what
-    /// real clips score with their own captions is in docs/measurements/generation.md), for
-    /// generated motion.
+    /// Cosine similarity of the prompt and the motion in the evaluator's space (-1 to 1, higher
+    /// is a closer match; comparable between takes of one prompt), for generated motion.
     pub text_similarity: Option<f32>,
 }
 
