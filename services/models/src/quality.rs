@@ -50,7 +50,8 @@ pub struct QualityReport {
     /// `jitter` over the real clips' jitter (1 is as smooth as real motion).
     pub jitter_ratio: Option<f32>,
     /// Cosine similarity of the prompt and the motion in the evaluator's space (-1 to 1, higher
-    /// is a closer match; comparable between takes of one prompt), for generated motion.
+    /// is a closer match; what real test clips score with their own captions is in
+    /// docs/measurements/generation.md), for generated motion.
     pub text_similarity: Option<f32>,
 }
 
@@ -166,6 +167,13 @@ impl RealMotion {
     pub fn from_card_metrics(metrics: &serde_json::Value) -> RealMotion {
         metrics.get(REAL_MOTION_KEY).and_then(|v| serde_json::from_value(v.clone()).ok()).unwrap_or_default()
     }
+}
+
+/// The cosine of two vectors (0 when one is zero): the prompt score of a report.
+pub fn cosine(a: &[f32], b: &[f32]) -> f32 {
+    let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    let norm = |v: &[f32]| v.iter().map(|x| x * x).sum::<f32>().sqrt();
+    dot / (norm(a) * norm(b)).max(f32::MIN_POSITIVE)
 }
 
 /// The key of a cleaned motion's skeleton in [`RealMotion`].

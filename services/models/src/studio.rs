@@ -7,7 +7,7 @@ use super::data::MODEL_FPS;
 use super::generation;
 use crate::checkpoint::Checkpoint;
 use crate::error::ModelError;
-use crate::quality::{Made, QualityReport, RealMotion, clean_up};
+use crate::quality::{Made, QualityReport, RealMotion, clean_up, cosine};
 use anymo_generator::generate::Codes;
 use anymo_generator::{Evaluator, GenerationError, Generator, Request};
 use anymo_motion::cleanup::Cleanup;
@@ -282,12 +282,6 @@ impl Studio {
         let text = judge.embed_sentence(&self.encoder.encode(&[prompt])?.remove(0))?;
         Ok(Some(cosine(&motion, &text)))
     }
-}
-
-fn cosine(a: &[f32], b: &[f32]) -> f32 {
-    let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
-    let norm = |v: &[f32]| v.iter().map(|x| x * x).sum::<f32>().sqrt();
-    dot / (norm(a) * norm(b)).max(f32::MIN_POSITIVE)
 }
 
 /// A generator error, as a refusal when the request caused it.

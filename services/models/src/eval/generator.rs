@@ -2,8 +2,9 @@
 //! caption generated on the clip's own skeleton at the clip's length, scored by the evaluator
 //! beside the real motion (the GT row, the ceiling): R-Precision top-1/2/3 in groups of 32,
 //! FID, MM-Dist and the plausibility figures of [`anymo_motion::quality`] (foot skating, foot
-//! flight, ground penetration, jitter, the largest one-frame step and the body's height), for
-//! all clips, humans and animals. Every decoded row comes twice: as the decoder gives it, and after the cleanup users
+//! flight, ground penetration, jitter, the largest one-frame step and the body's height) and
+//! the prompt score of the quality report (the cosine of motion and caption), for all clips,
+//! humans and animals. Every decoded row comes twice: as the decoder gives it, and after the cleanup users
 //! get by default (`+ cleanup`).
 
 use super::Table;
@@ -11,7 +12,7 @@ use crate::checkpoint::Checkpoints;
 use crate::codecs::{Graphs, bases_by_topology};
 use crate::data::{ModelClip, topology};
 use crate::generation::{self, is_human, token_clips};
-use crate::quality::{RealMotion, clean_up};
+use crate::quality::{RealMotion, clean_up, cosine};
 use anyhow::Result;
 use anymo_generator::evaluator::{fid, mm_dist, r_precision};
 use anymo_generator::generate::Codes;
@@ -69,6 +70,9 @@ pub struct Row {
     pub jumpy: f32,
     /// Mean height of the body's centre, diameters (posture: against the GT row's).
     pub body_height: f32,
+    /// Mean cosine of each motion and its caption in the evaluator's space: the quality
+    /// report's prompt score, averaged.
+    pub text_similarity: f32,
     /// Mean seconds to generate and decode one clip (0 for GT).
     pub seconds_per_clip: f64,
 }
@@ -215,6 +219,7 @@ fn table(model: &str, scored: &[Scored], truth: &[Scored], seconds: f64) -> Vec<
                 max_step: chosen.iter().map(|s| s.quality.max_step).fold(0.0, f32::max),
                 jumpy: chosen.iter().filter(|s| s.quality.max_step > JUMP).count() as f32 / n,
                 body_height: chosen.iter().map(|s| s.quality.body_height).sum::<f32>() / n,
+                text_similarity: chosen.iter().map(|s| cosine(&s.motion, &s.text)).sum::<f32>() / n,
                 seconds_per_clip: seconds,
             })
         })
@@ -260,7 +265,7 @@ pub fn evaluate_generators(
 pub fn markdown(rows: &[Row]) -> String {
     let headers = [
         "model", "clips", "R@1", "R@2", "R@3", "FID", "MM-Dist", "FS", "flight", "GP", "jitter", "max step", "jumpy",
-        "height", "s/clip",
+        "height", "match", "s/clip",
     ];
     let mut table = Table::new(&headers);
     fn three(x: impl std::fmt::Display) -> String {
@@ -282,8 +287,40 @@ pub fn markdown(rows: &[Row]) -> String {
             three(r.max_step),
             three(r.jumpy),
             three(r.body_height),
+            three(r.text_similarity),
             three(r.seconds_per_clip),
         ]);
     }
     table.into_text()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_row_has_a_cell_under_each_header() {
+        let row = Row {
+            model: "m".into(),
+            subset: "all".into(),
+            clips: 2,
+            r_precision: [0.1, 0.2, 0.3],
+            fid: 0.5,
+            mm_dist: 0.6,
+            foot_skating: 0.7,
+            foot_flight: 0.8,
+            ground_penetration: 0.9,
+            jitter: 1.0,
+            max_step: 1.1,
+            jumpy: 0.5,
+            body_height: 0.4,
+            text_similarity: 0.345,
+            seconds_per_clip: 0.2,
+        };
+        let text = markdown(&[row]);
+        let lines: Vec<&str> = text.lines().collect();
+        let cells = |line: &str| line.matches('|').count();
+        assert_eq!(cells(lines[0]), cells(lines[2]), "{text}");
+        assert!(lines[0].contains("| match |") && lines[2].contains("| 0.345 |"), "{text}");
+    }
 }
