@@ -18,6 +18,8 @@ pub const STEP_FPS: f32 = 30.0;
 /// The plausibility figures of one motion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quality {
+    /// The feet found ([`crate::contact::find_feet`]); 0 for a rig without legs.
+    pub feet: usize,
     /// Mean horizontal speed of feet on the ground (diameters per second); `None` without feet.
     pub foot_skating: Option<f32>,
     /// Mean height of the lowest foot above the floor (diameters); `None` without feet. A walk
@@ -71,6 +73,7 @@ pub fn measure(motion: &Motion) -> Quality {
             / STEP_FPS;
     let body_height = positions.iter().map(|p| p.y).sum::<f32>() / positions.len().max(1) as f32;
     Quality {
+        feet: feet.len(),
         foot_skating,
         foot_flight,
         foot_ground,
@@ -133,5 +136,6 @@ mod tests {
         let sunk = measure(&moved(3, 30.0, |_| Vec3::new(0.0, 0.85, 0.0)));
         assert!(sunk.ground_penetration > 0.0 && sunk.foot_flight == Some(0.0), "{sunk:?}");
         assert_eq!(measure(&biped("Fin", "Flap")).foot_skating, None);
+        assert_eq!((measure(&biped("Fin", "Flap")).feet, sunk.feet), (0, 2));
     }
 }

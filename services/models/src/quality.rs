@@ -59,12 +59,8 @@ impl QualityReport {
     /// The report of `motion` (cleaned form: diameter 1, at the models' rate), with what the
     /// cleanup did (`None`: it did not run), the real clips of its skeleton and its prompt score.
     pub fn of(motion: &Motion, planting: Option<Planting>, real: Option<SkeletonReference>, text: Option<f32>) -> Self {
-        let Quality { foot_skating, foot_flight, ground_penetration, jitter, max_step, body_height, .. } =
+        let Quality { feet, foot_skating, foot_flight, ground_penetration, jitter, max_step, body_height, .. } =
             measure(motion);
-        let feet = match planting {
-            Some(p) if p.feet > 0 => p.feet,
-            _ => anymo_motion::contact::find_feet(motion).len(),
-        };
         QualityReport {
             cleaned_up: planting.is_some(),
             feet,
