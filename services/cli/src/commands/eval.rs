@@ -184,7 +184,10 @@ fn run_generator(args: GeneratorArgs, command: &str) -> Result<()> {
             })?;
         }
         let value = serde_json::to_value(&real)?;
-        eval::record(dir, &args.evaluator, |metrics| metrics[REAL_MOTION_KEY] = value)?;
+        eval::record(dir, &args.evaluator, |metrics| {
+            metrics[REAL_MOTION_KEY] = value;
+            metrics[format!("{REAL_MOTION_KEY}_measured_by")] = command.into();
+        })?;
     }
     c.write_json(&serde_json::json!({ "rows": rows, "real_motion": real, "command": command }))
 }
