@@ -1,6 +1,7 @@
 //! The cleanup applied to decoded motion before users get it: a light temporal smoothing (no
 //! frame-to-frame jumps), then feet that plant. Planted feet are found from the decoded feet
-//! themselves ([`crate::contact`]); the root is lowered or raised so that planted feet stand on
+//! themselves ([`crate::contact`]); the root travels so that feet planted together stop
+//! sliding (a walk looped in place walks), is lowered or raised so that planted feet stand on
 //! the floor ([`Cleanup::floor`]: y = 0 for soles, higher for a rig whose leg ends are hocks),
 //! and each planted foot is held at one spot for its whole contact by two-bone IK
 //! ([`crate::ik`]), blended in and out over a few frames. A rig without legs is only smoothed.
@@ -65,8 +66,17 @@ impl Cleanup {
         let unit_points: Vec<Vec3> = points.iter().map(|p| *p / scale).collect();
         let planted = contacts(&unit_points, feet.len(), smoothed.fps() as f32, ground, &self.rule);
         let floor = self.floor * scale;
-        let shift = root_shift(&points, &planted, feet.len(), floor, 2.0 * motion.fps() as f32 / 30.0);
         let (_, frame_time, mut rotations, mut translations) = smoothed.into_parts();
+        // The whole body moves with the root: its feet's points with it.
+        let travel = root_travel(&points, &planted, feet.len());
+        let mut points = points;
+        for (f, way) in travel.iter().enumerate() {
+            translations[f * n] += *way;
+            for p in &mut points[f * feet.len()..(f + 1) * feet.len()] {
+                *p += *way;
+            }
+        }
+        let shift = root_shift(&points, &planted, feet.len(), floor, 2.0 * motion.fps() as f32 / 30.0);
         for (f, s) in shift.iter().enumerate() {
             translations[f * n].y += s;
         }
@@ -114,11 +124,42 @@ fn root_shift(points: &[Vec3], planted: &[Vec<bool>], feet: usize, floor: f32, s
     let measured: Vec<Option<f32>> = (0..frames)
         .map(|f| (0..feet).filter(|&k| planted[k][f]).map(|k| floor - points[f * feet + k].y).reduce(f32::max))
         .collect();
-    let known: Vec<(usize, f32)> = measured.iter().enumerate().filter_map(|(f, m)| m.map(|v| (f, v))).collect();
-    if known.is_empty() {
-        return vec![0.0; frames];
+    gaussian(&filled(&measured), sigma)
+}
+
+/// For every frame, how far (horizontally) the root must have travelled since the first so that
+/// planted feet stop sliding together: at each step with feet planted on both of its frames,
+/// the slide of the foot that slides least, turned back. A walk looped in place (its stance
+/// foot sliding back under a still root) then walks, and a foot that already holds still keeps
+/// the root where it is. Steps without planted feet go at the speed of their neighbours
+/// (interpolated, held at the ends).
+fn root_travel(points: &[Vec3], planted: &[Vec<bool>], feet: usize) -> Vec<Vec3> {
+    let frames = points.len() / feet;
+    let at = |f: usize, k: usize| points[f * feet + k];
+    let steps: Vec<Option<Vec3>> = (1..frames)
+        .map(|f| {
+            (0..feet)
+                .filter(|&k| planted[k][f] && planted[k][f - 1])
+                .map(|k| (at(f - 1, k) - at(f, k)).with_y(0.0))
+                .min_by(|a, b| a.length().total_cmp(&b.length()))
+        })
+        .collect();
+    let x = filled(&steps.iter().map(|s| s.map(|v| v.x)).collect::<Vec<_>>());
+    let z = filled(&steps.iter().map(|s| s.map(|v| v.z)).collect::<Vec<_>>());
+    let mut way = Vec::with_capacity(frames);
+    way.push(Vec3::ZERO);
+    for (dx, dz) in x.into_iter().zip(z) {
+        let last = *way.last().expect("one frame in");
+        way.push(last + Vec3::new(dx, 0.0, dz));
     }
-    let filled: Vec<f32> = (0..frames)
+    way
+}
+
+/// Values known at some indices, linearly interpolated between them and held at the ends;
+/// all zero when none is known.
+fn filled(measured: &[Option<f32>]) -> Vec<f32> {
+    let known: Vec<(usize, f32)> = measured.iter().enumerate().filter_map(|(f, m)| m.map(|v| (f, v))).collect();
+    (0..measured.len())
         .map(|f| {
             let after = known.partition_point(|k| k.0 < f);
             match (after.checked_sub(1).map(|i| known[i]), known.get(after)) {
@@ -128,8 +169,7 @@ fn root_shift(points: &[Vec3], planted: &[Vec<bool>], feet: usize, floor: f32, s
                 (None, None) => 0.0,
             }
         })
-        .collect();
-    gaussian(&filled, sigma)
+        .collect()
 }
 
 /// For one foot, every frame's lock: the spot it is held at (the mean of its contact points
@@ -296,6 +336,37 @@ mod tests {
             let (a, b) = (all_joint_positions(&motion.slice(f, 1)), all_joint_positions(&planted.slice(f, 1)));
             let shift = b[0].y - a[0].y;
             assert!((b[8].y - a[8].y - shift).abs() < 1e-5 && b[8].x == a[8].x, "the head follows the root only");
+        }
+    }
+
+    #[test]
+    fn a_walk_looped_in_place_travels_on_its_planted_feet() {
+        // Standing on both feet, both thighs swing back by 0.3 rad over one second: the soles
+        // (0.85 below the hips, 0.15 ahead) slide back under a still root, as on a treadmill.
+        let stand = biped("Leg", "Foot");
+        let (skeleton, _, _, _) = stand.into_parts();
+        let n = skeleton.len();
+        let (mut rotations, mut translations) = (Vec::new(), Vec::new());
+        for f in 0..31 {
+            for j in 0..n {
+                let thigh = skeleton.joint(j).name.ends_with("UpLeg");
+                rotations.push(if thigh { Quat::from_rotation_x(0.3 * f as f32 / 30.0) } else { Quat::IDENTITY });
+                translations.push(if j == 0 { Vec3::new(0.0, 0.95, 0.0) } else { skeleton.joint(j).offset });
+            }
+        }
+        let motion = Motion::new(skeleton, 1.0 / 30.0, rotations, translations).unwrap();
+        let (walked, report) = Cleanup { smoothing: 0.0, ..Cleanup::default() }.apply(&motion);
+        assert_eq!(report.planted, 1.0, "{report:?}");
+        // The root moves forward by the soles' slide, and the soles hold still.
+        let sole_z = |a: f32| -0.85 * a.sin() + 0.15 * a.cos();
+        let root = walked.translations(30)[0];
+        assert!((root.z - (sole_z(0.0) - sole_z(0.3))).abs() < 1e-4 && root.x.abs() < 1e-6, "{root}");
+        let feet = find_feet(&walked);
+        let globals = all_global_transforms(&walked);
+        let tolerance = 1e-3 * walked.skeleton().diameter();
+        for f in 0..31 {
+            let sole = feet[0].point(walked.skeleton(), &globals[f * n..(f + 1) * n]);
+            assert!((sole.z - sole_z(0.0)).abs() < tolerance, "frame {f}: {sole}");
         }
     }
 

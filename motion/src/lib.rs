@@ -7,7 +7,8 @@
 //! and normalises clips for training without touching what users get back; [`metrics`] measures
 //! reconstruction and transfer. [`contact`] finds any rig's feet and their ground contacts,
 //! [`ik`] places a leg, [`cleanup`] smooths decoded motion and plants its feet, [`posture`]
-//! stands a rest pose up, and [`quality`] states how plausible a motion is.
+//! stands a rest pose up, [`quality`] states how plausible a motion is, and [`activity`] what it
+//! does (travel and turns against its facing, feet in the air, hands and head).
 //!
 //! ```
 //! use anymo_motion::{bvh, kinematics, motion::Motion};
@@ -20,6 +21,7 @@
 //! # Ok::<(), anymo_motion::bvh::BvhError>(())
 //! ```
 
+pub mod activity;
 pub mod bvh;
 pub mod cleanup;
 pub mod contact;
