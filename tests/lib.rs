@@ -157,3 +157,48 @@ pub fn test_tool(path: &Path, what: &str) -> bool {
     eprintln!("skipping: {how}");
     false
 }
+
+/// The rows of the manifest in the data folder `data`, each as its cells by column name.
+pub fn manifest_rows(data: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let manifest = std::fs::read_to_string(data.join("manifest.tsv")).expect("a readable manifest");
+    let mut lines = manifest.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split('\t').collect();
+    lines
+        .map(|line| header.iter().zip(line.split('\t')).map(|(h, cell)| (h.to_string(), cell.to_string())).collect())
+        .collect()
+}
+
+/// Content words and a crude stem, to check that a held-out query or prompt shares no word with
+/// the captions it targets.
+pub mod words {
+    /// Words that carry no content (articles, prepositions, pronouns, conjunctions).
+    const FUNCTION_WORDS: &[&str] = &[
+        "a", "an", "the", "in", "on", "of", "with", "to", "and", "or", "its", "his", "her", "their", "them", "is",
+        "are", "at", "by", "for", "from", "as", "into", "onto", "then", "while", "after", "before", "one", "both",
+    ];
+
+    /// The words of `text` that carry content, lowercased.
+    pub fn content_words(text: &str) -> Vec<String> {
+        text.split(|c: char| !c.is_alphanumeric())
+            .filter(|w| !w.is_empty())
+            .map(str::to_lowercase)
+            .filter(|w| !FUNCTION_WORDS.contains(&w.as_str()))
+            .collect()
+    }
+
+    /// A crude stem: one common suffix off, keeping at least three letters.
+    pub fn stem(word: &str) -> &str {
+        for suffix in ["ing", "ed", "es", "s", "ly"] {
+            if let Some(root) = word.strip_suffix(suffix).filter(|r| r.len() >= 3) {
+                return root;
+            }
+        }
+        word
+    }
+
+    /// Same stem, or one stem (of four letters or more) begins the other ("wave" / "waves").
+    pub fn related(a: &str, b: &str) -> bool {
+        let (a, b) = (stem(a), stem(b));
+        a == b || (a.len() >= 4 && b.starts_with(a)) || (b.len() >= 4 && a.starts_with(b))
+    }
+}

@@ -44,6 +44,11 @@ pub struct GeneratorConfig {
     pub decoding_steps: usize,
     /// Probability that training drops the prompt (for classifier-free guidance).
     pub text_dropout: f32,
+    /// Length of the Gaussian noise training adds to each prompt embedding (a unit vector)
+    /// before setting it back to unit length, so that nearby wordings condition alike; 0 for
+    /// none (generators trained before it existed).
+    #[serde(default)]
+    pub text_noise: f32,
     /// Hidden width of the length predictor.
     pub length_hidden: usize,
 }
@@ -61,6 +66,7 @@ impl GeneratorConfig {
             codes,
             decoding_steps: 10,
             text_dropout: 0.1,
+            text_noise: 0.0,
             length_hidden: 192,
         }
     }
@@ -156,10 +162,12 @@ impl Generator {
         clip_steps: &[usize],
         rng: &mut dyn RngCore,
     ) -> Result<(Tensor, [f32; 3])> {
-        let full = Condition::new(text, skeleton)?;
+        let noisy: Vec<Vec<f32>> = text.iter().map(|t| with_noise(t, self.config.text_noise, rng)).collect();
+        let noisy: Vec<&[f32]> = noisy.iter().map(Vec::as_slice).collect();
+        let full = Condition::new(&noisy, skeleton)?;
         let zero = vec![0f32; text[0].len()];
         let dropped: Vec<&[f32]> =
-            text.iter().map(|&t| if rng.random::<f32>() < self.config.text_dropout { &zero[..] } else { t }).collect();
+            noisy.iter().map(|&t| if rng.random::<f32>() < self.config.text_dropout { &zero[..] } else { t }).collect();
         let condition = Condition::new(&dropped, skeleton)?;
         let first: Vec<Vec<u32>> = codes.iter().map(|row| row.iter().map(|step| step[0]).collect()).collect();
         let base = self.base.loss(&first, &condition, rng)?;
@@ -338,6 +346,19 @@ impl Generator {
     }
 }
 
+/// A unit embedding moved by Gaussian noise of expected length `length` and set back to unit
+/// length (unchanged for `length` 0).
+fn with_noise(embedding: &[f32], length: f32, rng: &mut dyn RngCore) -> Vec<f32> {
+    if length == 0.0 {
+        return embedding.to_vec();
+    }
+    let sigma = length / (embedding.len() as f32).sqrt();
+    let normal = rand_distr::Normal::new(0.0, sigma).expect("a finite, non-negative deviation");
+    let moved: Vec<f32> = embedding.iter().map(|x| x + rand_distr::Distribution::sample(&normal, rng)).collect();
+    let norm = moved.iter().map(|x| x * x).sum::<f32>().sqrt().max(f32::MIN_POSITIVE);
+    moved.into_iter().map(|x| x / norm).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -379,6 +400,23 @@ mod tests {
             let chained = g.chain(&[(&text, 3), (&text, 4)], &skeleton, &request(1)).unwrap().remove(0);
             assert_eq!(chained.len(), 7);
         }
+    }
+
+    #[test]
+    fn prompt_noise_moves_an_embedding_by_about_its_length_and_keeps_it_unit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let unit: Vec<f32> = (0..TEXT_DIM).map(|i| if i == 0 { 1.0 } else { 0.0 }).collect();
+        assert_eq!(with_noise(&unit, 0.0, &mut rng), unit);
+        let draws = 200;
+        let mut cosine = 0.0;
+        for _ in 0..draws {
+            let moved = with_noise(&unit, 0.3, &mut rng);
+            let norm = moved.iter().map(|x| x * x).sum::<f32>().sqrt();
+            assert!((norm - 1.0).abs() < 1e-5, "{norm}");
+            cosine += moved[0] / draws as f32;
+        }
+        // Noise of length 0.3 at right angles to most of the vector: cos = 1 / sqrt(1 + 0.09).
+        assert!((cosine - 1.0 / 1.09f32.sqrt()).abs() < 0.01, "{cosine}");
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! Text- and skeleton-conditioned motion token generation on TAT's tokens (NEC appendix D with
 //! MoMask's recipe): a masked transformer over the first RVQ layer, a residual transformer for
 //! the deeper layers, an autoregressive variant behind the same trait, a length predictor,
-//! token-level editing, and the text-motion evaluator that scores all of them.
+//! token-level editing, caption augmentation for training, and the text-motion evaluator that
+//! scores all of them.
 
 pub mod autoregressive;
 pub mod condition;
@@ -10,6 +11,7 @@ pub mod evaluator;
 pub mod generate;
 pub mod length;
 pub mod masked;
+pub mod paraphrase;
 pub mod residual;
 pub mod sampling;
 pub mod token_model;

@@ -51,7 +51,20 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     };
 
     ok(anymo(&models, &train("evaluator", "evaluator", &["--steps", "3", "--batch-size", "8"])).output().unwrap());
-    let tiny = ["--steps", "6", "--batch-size", "4", "--dim", "32", "--save-every", "0"];
+    let tiny = [
+        "--steps",
+        "6",
+        "--batch-size",
+        "4",
+        "--dim",
+        "32",
+        "--save-every",
+        "0",
+        "--paraphrases",
+        "4",
+        "--text-noise",
+        "0.3",
+    ];
     let masked = |name: &str| train("generator", name, &[&["--name", name][..], &tiny].concat());
     ok(anymo(&models, &masked("straight")).output().unwrap());
     let mut child = anymo(&models, &masked("killed")).stderr(std::process::Stdio::null()).spawn().unwrap();
@@ -66,6 +79,11 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
         assert_eq!(na, nb);
         assert!(va == vb, "{na} differs between the straight and the resumed run");
     }
+    // Training reworded the captions and noised the prompts, and the card says so.
+    let card: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ck.join("straight.json")).unwrap()).unwrap();
+    assert_eq!(card["config"]["paraphrases"], 4, "{card}");
+    assert!((card["config"]["generator"]["text_noise"].as_f64().unwrap() - 0.3).abs() < 1e-6, "{card}");
     let ar = [&["--kind", "autoregressive", "--name", "ar"][..], &tiny].concat();
     ok(anymo(&models, &train("generator", "ar", &ar)).output().unwrap());
 
@@ -99,6 +117,37 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     }
     let gt = rows.iter().find(|r| r["model"] == "GT" && r["subset"] == "all").unwrap();
     assert!(gt["fid"].as_f64().unwrap().abs() < 1e-3, "the real motions are their own reference");
+
+    // The held-out prompts' protocol runs on a prompt file of one's own: each sample's verdict
+    // is its figures against its action's calibrated thresholds, and every rig is listed.
+    let prompts = dir.join("prompts.tsv");
+    std::fs::write(&prompts, "walk\tsomebody strolls ahead\nbow\ta butler makes a courteous obeisance\n").unwrap();
+    let judged = dir.join("prompts.json");
+    let mut eval_prompts = args(&["eval", "prompts", "--manifest", &manifest, "--limit", "4", "--dir", &ck_s]);
+    eval_prompts.extend(args(&["--models", "straight", "--prompts", &prompts.to_string_lossy()]));
+    eval_prompts.extend(args(&["--json", &judged.to_string_lossy()]));
+    ok(anymo(&models, &eval_prompts).output().unwrap());
+    let judged: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&judged).unwrap()).unwrap();
+    assert_eq!(judged["report"]["prompts"], 2, "{judged}");
+    let report = &judged["report"];
+    let rigs = report["rigs"].as_array().unwrap();
+    let tried: u64 = rigs.iter().map(|r| r["generated"]["straight"]["tried"].as_u64().unwrap()).sum();
+    let samples = report["samples"].as_array().unwrap();
+    assert!(!rigs.is_empty() && samples.len() as u64 == tried, "{judged}");
+    for sample in samples {
+        let checks = report["calibration"]["actions"][sample["action"].as_str().unwrap()]["checks"].as_array().unwrap();
+        let passes = checks.iter().zip(sample["figures"].as_array().unwrap()).all(|(check, figure)| {
+            // A figure the rig has no part for (null) is skipped.
+            let threshold = check["value"].as_f64().unwrap();
+            figure[1]
+                .as_f64()
+                .is_none_or(|v| if check["bound"] == "at-least" { v >= threshold } else { v <= threshold })
+        });
+        assert_eq!(sample["passed"].as_bool(), Some(passes), "{sample}");
+    }
+    std::fs::write(&prompts, "fly\ta bird soars\n").unwrap();
+    let refused = anymo(&models, &eval_prompts).output().unwrap();
+    assert!(!refused.status.success() && String::from_utf8_lossy(&refused.stderr).contains("unknown action"));
 
     // Generation on a human, a quadruped and a zero-shot skeleton keeps each hierarchy.
     let find = |needle: &str| -> PathBuf {

@@ -62,6 +62,10 @@ pub struct GeneratorCard {
     pub generator: GeneratorConfig,
     /// The training run's settings.
     pub training: StepTraining,
+    /// Reworded variants per caption that training drew among beside the captions (0: the
+    /// captions only, as generators trained before caption augmentation).
+    #[serde(default)]
+    pub paraphrases: usize,
 }
 
 /// The text-motion evaluator's card.

@@ -6,11 +6,13 @@ use super::data::{ModelClip, topology};
 use crate::card::{EvaluatorCard, GeneratorCard};
 use crate::checkpoint::Checkpoint;
 use anyhow::Result;
+use anymo_generator::paraphrase::{self, Rewording};
 use anymo_generator::{Evaluator, Generator, TokenClip};
 use anymo_tokenizer::nn::ModelCard;
 use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::{detokenize, encode_whole};
 use anymo_tokenizer::text::CachedEncoder;
+use rand::SeedableRng;
 
 /// Subjects counted as humans in the per-subject figures; every other subject is an animal or
 /// creature.
@@ -60,6 +62,32 @@ pub fn token_clips(
         });
     }
     Ok(out)
+}
+
+/// Adds up to `per_caption` reworded variants of each clip's captions (see
+/// [`anymo_generator::paraphrase`]) with their sentence embeddings, drawn from `seed`; returns
+/// how many were added. Training then draws among a clip's captions and their variants alike.
+pub fn add_paraphrases(
+    clips: &mut [TokenClip],
+    per_caption: usize,
+    encoder: &mut CachedEncoder,
+    seed: u64,
+) -> Result<usize> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut added = 0;
+    for clip in clips.iter_mut() {
+        let new: Vec<String> = clip
+            .captions
+            .iter()
+            .flat_map(|c| paraphrase::variants(c, per_caption, Rewording::default(), &mut rng))
+            .filter(|v| !clip.captions.contains(v))
+            .collect();
+        let refs: Vec<&str> = new.iter().map(String::as_str).collect();
+        clip.text.extend(encoder.encode(&refs)?);
+        added += new.len();
+        clip.captions.extend(new);
+    }
+    Ok(added)
 }
 
 /// Loads a trained generator (`generator`, `generator-ar`, ...).

@@ -483,11 +483,19 @@ pub struct GeneratorRecipe {
     pub lr: f64,
     /// Transformer width.
     pub dim: usize,
+    /// Reworded variants per caption to train on beside the captions.
+    pub paraphrases: usize,
+    /// Length of the noise added to prompt embeddings in training (see
+    /// [`GeneratorConfig::text_noise`]).
+    pub text_noise: f32,
 }
 
-/// Trains a generator on the train split's tokens and ships it.
+/// Trains a generator on the train split's tokens (captions with their reworded variants) and
+/// ships it.
 pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut CachedEncoder) -> Result<PathBuf> {
-    let corpus = token_corpus(run, &recipe.tokenizer, false, encoder)?;
+    let mut corpus = token_corpus(run, &recipe.tokenizer, false, encoder)?;
+    let added = generation::add_paraphrases(&mut corpus.clips, recipe.paraphrases, encoder, run.seed)?;
+    eprintln!("{added} reworded captions added");
     let (clips, rvq) = (&corpus.clips, corpus.rvq);
     let name = recipe.name.clone().unwrap_or_else(|| match recipe.kind {
         Kind::Masked => "generator".into(),
@@ -499,6 +507,7 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
     config.residual.dim = recipe.dim;
     config.residual.ff = 2 * recipe.dim;
     config.length_hidden = recipe.dim;
+    config.text_noise = recipe.text_noise;
     let mut model = Generator::new(config.clone(), run.seed)?;
     eprintln!("{name}: {} parameters", model.params().count());
     let settings = step_settings(run, recipe.steps, recipe.lr, recipe.batch_size);
@@ -512,7 +521,12 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
     })?;
     let card = ModelCard {
         model: name.clone(),
-        config: GeneratorCard { trained_on: corpus.trained_on, generator: config, training: settings },
+        config: GeneratorCard {
+            trained_on: corpus.trained_on,
+            generator: config,
+            training: settings,
+            paraphrases: recipe.paraphrases,
+        },
         data: corpus.record,
         steps: state.step,
         metrics: serde_json::json!({ "train_seconds": state.seconds }),

@@ -1,15 +1,16 @@
-//! `anymo eval tokenizer|generator|retrieval`: the tokenizer's reconstruction table (TAT,
-//! baseline, ablations) with its transfer figures, text-to-motion by MoMask's protocol, and
-//! search by EVAL.md's retrieval protocol.
+//! `anymo eval tokenizer|generator|prompts|retrieval`: the tokenizer's reconstruction table
+//! (TAT, baseline, ablations) with its transfer figures, text-to-motion by MoMask's protocol,
+//! held-out prompts judged by what the motion does, and search by EVAL.md's retrieval protocol.
 
 use super::context::{StoreArgs, checkpoints, writable_checkpoints};
 use super::generate::SamplingArgs;
 use super::search::WeightArgs;
 use anyhow::{Context, Result};
+use anymo_generator::Request;
 use anymo_models::checkpoint::Checkpoint;
 use anymo_models::data::ModelClip;
 use anymo_models::eval::retrieval::Hybrid;
-use anymo_models::eval::{self, by_example, generator, retrieval, tokenizer};
+use anymo_models::eval::{self, by_example, generator, prompts, retrieval, tokenizer};
 use anymo_models::quality::REAL_MOTION_KEY;
 use anymo_models::search::SearchModels;
 use anymo_retrieval::benchmark;
@@ -30,6 +31,9 @@ enum What {
     Tokenizer(TokenizerArgs),
     /// Text-to-motion on the test split by MoMask's protocol, GT row beside the generators.
     Generator(GeneratorArgs),
+    /// Held-out prompts worded unlike any caption, generated on every human and four-legged
+    /// rig of the test and zero-shot splits and judged by what the motion does.
+    Prompts(PromptsArgs),
     /// Search on the test split: held-out captions, paraphrases and motion by example, per
     /// retriever; then motion by example across skeletons, the whole corpus as the gallery.
     Retrieval(RetrievalArgs),
@@ -111,6 +115,30 @@ struct GeneratorArgs {
 }
 
 #[derive(Parser)]
+struct PromptsArgs {
+    /// Generators to compare, by checkpoint name.
+    #[arg(long, value_delimiter = ',', default_value = "generator,generator-ar")]
+    models: Vec<String>,
+    /// The evaluator checkpoint (its card holds the real clips' floor the cleanup stands on).
+    #[arg(long, default_value = "evaluator")]
+    evaluator: String,
+    /// A prompt file (tab-separated action and prompt, as the shipped one) [default: the
+    /// shipped held-out prompts].
+    #[arg(long)]
+    prompts: Option<PathBuf>,
+    /// Seed of sampling (prompt `i` is generated with seed + `i`).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    sampling: SamplingArgs,
+    /// Record each generator's pass rates in its card.
+    #[arg(long)]
+    record: bool,
+    #[command(flatten)]
+    common: Common,
+}
+
+#[derive(Parser)]
 struct TokenizerArgs {
     /// Checkpoints to compare, by name.
     #[arg(long, value_delimiter = ',', default_value = "tat,baseline,tat-additive,tat-scratch")]
@@ -134,6 +162,7 @@ pub fn run(args: Args) -> Result<()> {
     match args.what {
         What::Tokenizer(a) => run_tokenizer(a, &command),
         What::Generator(a) => run_generator(a, &command),
+        What::Prompts(a) => run_prompts(a, &command),
         What::Retrieval(a) => run_retrieval(a, &command),
     }
 }
@@ -190,6 +219,37 @@ fn run_generator(args: GeneratorArgs, command: &str) -> Result<()> {
         })?;
     }
     c.write_json(&serde_json::json!({ "rows": rows, "real_motion": real, "command": command }))
+}
+
+fn run_prompts(args: PromptsArgs, command: &str) -> Result<()> {
+    let c = &args.common;
+    let record_in = c.record_in(args.record)?;
+    let text = match &args.prompts {
+        Some(path) => std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
+        None => prompts::HELDOUT_PROMPTS.to_string(),
+    };
+    let held_out = prompts::parse_prompts(&text)?;
+    let (clips, rejected) = eval::clips(&c.manifest, c.limit)?;
+    eprintln!("{} prompts; {} clips ({rejected} rejected by cleaning)", held_out.len(), clips.len());
+    let set = checkpoints(c.dir.as_deref());
+    let encoder = || c.store.encoder();
+    let models = &args.models;
+    let draw = Request { steps: None, samples: 1, sampling: args.sampling.sampling(), seed: args.seed };
+    let report = prompts::evaluate_prompts(&set, &args.evaluator, models, &clips, &held_out, &encoder, draw)?;
+    println!("{}", report.markdown(models));
+    if let Some(dir) = &record_in {
+        for name in models {
+            let rigs: Vec<serde_json::Value> = report
+                .rigs
+                .iter()
+                .map(|r| serde_json::json!({ "rig": r.rig, "split": r.split, "real": r.real, "generated": r.generated.get(name) }))
+                .collect();
+            eval::record(dir, name, |metrics| {
+                metrics["held_out_prompts"] = serde_json::json!({ "rigs": rigs, "measured_by": command });
+            })?;
+        }
+    }
+    c.write_json(&serde_json::json!({ "report": report, "command": command }))
 }
 
 fn run_retrieval(args: RetrievalArgs, command: &str) -> Result<()> {

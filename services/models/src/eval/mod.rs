@@ -1,12 +1,13 @@
 //! The evaluations of `../shared/docs/EVAL.md`, each a report with its Markdown tables and its
 //! figures as JSON: the tokenizers' reconstruction and transfer ([`tokenizer`]), text to motion
-//! ([`generator`]), search ([`retrieval`]) and motion by example across skeletons
+//! ([`generator`]), held-out prompts judged by what the generated motion does ([`prompts`]), search ([`retrieval`]) and motion by example across skeletons
 //! ([`by_example`]). The metrics themselves are the domain crates'
 //! (`anymo_motion::metrics`, `anymo_generator::evaluator`, `anymo_retrieval::metrics`); these
 //! modules are the protocols that choose the clips, run the models and tabulate.
 
 pub mod by_example;
 pub mod generator;
+pub mod prompts;
 pub mod retrieval;
 pub mod tokenizer;
 
