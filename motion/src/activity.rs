@@ -8,7 +8,7 @@
 //! left-to-right axis (see [`crate::reference::facing_angle`]), its parts found by the
 //! rule-based joint labels (a head, hands, feet), so a figure a rig has no part for is `None`.
 
-use crate::contact::{find_feet, ground_height};
+use crate::contact::{find_feet, foot_points, ground_height};
 use crate::kinematics::{all_global_transforms, all_joint_positions};
 use crate::motion::Motion;
 use crate::prep::labels::{JointLabel, Side, label_skeleton};
@@ -88,10 +88,7 @@ pub fn measure(motion: &Motion) -> Activity {
     let feet = find_feet(motion);
     let k = feet.len();
     let globals = all_global_transforms(motion);
-    let points: Vec<Vec3> = (0..frames)
-        .flat_map(|f| feet.iter().map(move |foot| (f, foot)))
-        .map(|(f, foot)| foot.point(skeleton, &globals[f * n..(f + 1) * n]) * scale)
-        .collect();
+    let points: Vec<Vec3> = foot_points(motion, &feet, &globals).into_iter().map(|p| p * scale).collect();
     let foot = |f: usize, i: usize| points[f * k + i];
     let ground = if k == 0 { 0.0 } else { ground_height(&points, k) };
     // The foot a frame stands on: its lowest, when that is on the ground.

@@ -9,7 +9,7 @@
 //! It works on cleaned motion (diameter 1, Y up, translation on the root only), the form the
 //! models decode to.
 
-use crate::contact::{ContactRule, Foot, contacts, find_feet, ground_height, runs};
+use crate::contact::{ContactRule, Foot, contacts, find_feet, foot_points, ground_height, runs};
 use crate::kinematics::{Transform, all_global_transforms, global_transforms};
 use crate::motion::Motion;
 use glam::{Quat, Vec3};
@@ -56,11 +56,7 @@ impl Cleanup {
         let skeleton = smoothed.skeleton().clone();
         let (n, frames) = (skeleton.len(), smoothed.frames());
         let globals = all_global_transforms(&smoothed);
-        let points: Vec<Vec3> = (0..frames)
-            .flat_map(|f| {
-                feet.iter().map(|foot| foot.point(&skeleton, &globals[f * n..(f + 1) * n])).collect::<Vec<_>>()
-            })
-            .collect();
+        let points = foot_points(&smoothed, &feet, &globals);
         let scale = skeleton.diameter();
         let ground = ground_height(&points, feet.len()) / scale;
         let unit_points: Vec<Vec3> = points.iter().map(|p| *p / scale).collect();

@@ -37,6 +37,15 @@ impl Foot {
     }
 }
 
+/// Every frame's contact point of each foot, frame-major (`frames x feet`), in the motion's
+/// units, from its global transforms (`frames x joints`).
+pub fn foot_points(motion: &Motion, feet: &[Foot], globals: &[Transform]) -> Vec<Vec3> {
+    let (skeleton, n) = (motion.skeleton(), motion.skeleton().len());
+    (0..motion.frames())
+        .flat_map(|f| feet.iter().map(move |foot| foot.point(skeleton, &globals[f * n..(f + 1) * n])))
+        .collect()
+}
+
 /// The feet of a motion's skeleton, ordered by leaf: the [`leg_ends`] whose mean height over the
 /// motion is within [`FOOT_BAND`] of the lowest one's. Empty for a rig without legs.
 pub fn find_feet(motion: &Motion) -> Vec<Foot> {

@@ -2,7 +2,7 @@
 //! slide, float or sink, and joints that shake or jump. All lengths are in diameters of the
 //! skeleton, so rigs of any size compare; the floor is y = 0.
 
-use crate::contact::{find_feet, ground_height};
+use crate::contact::{find_feet, foot_points, ground_height};
 use crate::kinematics::{all_global_transforms, all_joint_positions};
 use crate::metrics::{foot_skating, ground_penetration};
 use crate::motion::Motion;
@@ -51,10 +51,7 @@ pub fn measure(motion: &Motion) -> Quality {
         (None, None, None)
     } else {
         let globals = all_global_transforms(motion);
-        let points: Vec<Vec3> = (0..frames)
-            .flat_map(|f| feet.iter().map(move |foot| (f, foot)))
-            .map(|(f, foot)| foot.point(skeleton, &globals[f * n..(f + 1) * n]) * scale)
-            .collect();
+        let points: Vec<Vec3> = foot_points(motion, &feet, &globals).into_iter().map(|p| p * scale).collect();
         let k = feet.len();
         let all: Vec<usize> = (0..k).collect();
         let flight =
