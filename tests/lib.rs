@@ -95,6 +95,18 @@ pub fn reference_files(env: &str, fixture: &str) -> Vec<PathBuf> {
     refs
 }
 
+/// Runs the `anymo` binary at `binary` (a test's `env!("CARGO_BIN_EXE_anymo")`) with `args`, the
+/// sentence encoder in `models`, the built-in checkpoints and one thread, as a user's first run.
+pub fn run_anymo(binary: &str, models: &Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(binary)
+        .args(args)
+        .env("ANYMO_MODELS", models)
+        .env_remove("ANYMO_CHECKPOINTS")
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .expect("the anymo binary runs")
+}
+
 /// Asserts that a command succeeded, showing its standard error when it did not.
 pub fn succeeded(out: std::process::Output) -> std::process::Output {
     assert!(out.status.success(), "command failed: {}", String::from_utf8_lossy(&out.stderr));

@@ -1,7 +1,7 @@
 //! The cleanup applied to decoded motion before users get it: a light temporal smoothing (no
 //! frame-to-frame jumps), then feet that plant. Planted feet are found from the decoded feet
-//! themselves ([`crate::contact`]); the root travels so that feet planted together stop
-//! sliding (a walk looped in place walks), is lowered or raised so that planted feet stand on
+//! themselves ([`crate::contact`]); unless the root's path is known, the root travels so that
+//! feet planted together stop sliding (a walk looped in place walks) and is lowered or raised so that planted feet stand on
 //! the floor ([`Cleanup::floor`]: y = 0 for soles, higher for a rig whose leg ends are hocks),
 //! and each planted foot is held at one spot for its whole contact by two-bone IK
 //! ([`crate::ik`]), blended in and out over a few frames. A rig without legs is only smoothed.
@@ -26,13 +26,19 @@ pub struct Cleanup {
     /// The height (diameters) planted feet's contact points stand at above y = 0: 0 for soles,
     /// more for leg ends above the ground (real clips' [`crate::quality::Quality::foot_ground`]).
     pub floor: f32,
+    /// Whether the root keeps its path and height, and planted feet are held where they stand
+    /// rather than on the floor: for motion whose root is known (a real clip's tokens carry it),
+    /// where turning every slide back would add up to a path that leaves the clip's. Otherwise
+    /// the root travels so that feet planted together stop sliding, and rises or sinks so that
+    /// they stand on the floor.
+    pub keep_root: bool,
 }
 
 impl Default for Cleanup {
     /// Smoothing of one frame at 30 fps (it removes an alternation between frames and leaves a
-    /// step's shape), and a blend of three frames.
+    /// step's shape), a blend of three frames, and a root that moves with the planted feet.
     fn default() -> Self {
-        Cleanup { smoothing: 1.0 / 30.0, rule: ContactRule::default(), blend: 0.1, floor: 0.0 }
+        Cleanup { smoothing: 1.0 / 30.0, rule: ContactRule::default(), blend: 0.1, floor: 0.0, keep_root: false }
     }
 }
 
@@ -64,18 +70,20 @@ impl Cleanup {
         let floor = self.floor * scale;
         let (_, frame_time, mut rotations, mut translations) = smoothed.into_parts();
         // The whole body moves with the root: its feet's points with it.
-        let travel = root_travel(&points, &planted, feet.len());
         let mut points = points;
-        for (f, way) in travel.iter().enumerate() {
-            translations[f * n] += *way;
-            for p in &mut points[f * feet.len()..(f + 1) * feet.len()] {
-                *p += *way;
+        if !self.keep_root {
+            for (f, way) in root_travel(&points, &planted, feet.len()).iter().enumerate() {
+                translations[f * n] += *way;
+                for p in &mut points[f * feet.len()..(f + 1) * feet.len()] {
+                    *p += *way;
+                }
+            }
+            let shift = root_shift(&points, &planted, feet.len(), floor, 2.0 * motion.fps() as f32 / 30.0);
+            for (f, s) in shift.iter().enumerate() {
+                translations[f * n].y += s;
             }
         }
-        let shift = root_shift(&points, &planted, feet.len(), floor, 2.0 * motion.fps() as f32 / 30.0);
-        for (f, s) in shift.iter().enumerate() {
-            translations[f * n].y += s;
-        }
+        let floor = (!self.keep_root).then_some(floor);
         let blend = (self.blend * motion.fps() as f32).round() as usize;
         let locks: Vec<Vec<Option<(Vec3, f32)>>> =
             planted.iter().enumerate().map(|(k, p)| locks(&points, feet.len(), k, p, blend, floor)).collect();
@@ -169,7 +177,7 @@ fn filled(measured: &[Option<f32>]) -> Vec<f32> {
 }
 
 /// For one foot, every frame's lock: the spot it is held at (the mean of its contact points
-/// over the contact, at `floor`) and how strongly (1 inside the contact, fading over `blend`
+/// over the contact, at `floor` when there is one) and how strongly (1 inside the contact, fading over `blend`
 /// frames on either side), or `None` where it moves freely.
 fn locks(
     points: &[Vec3],
@@ -177,13 +185,13 @@ fn locks(
     k: usize,
     planted: &[bool],
     blend: usize,
-    floor: f32,
+    floor: Option<f32>,
 ) -> Vec<Option<(Vec3, f32)>> {
     let frames = planted.len();
     let mut out: Vec<Option<(Vec3, f32)>> = vec![None; frames];
     for run in runs(planted) {
         let mean = run.clone().map(|f| points[f * feet + k]).sum::<Vec3>() / run.len() as f32;
-        let spot = mean.with_y(floor);
+        let spot = floor.map_or(mean, |y| mean.with_y(y));
         let first = run.start.saturating_sub(blend);
         let last = (run.end + blend).min(frames);
         for (f, slot) in out.iter_mut().enumerate().take(last).skip(first) {
@@ -363,6 +371,11 @@ mod tests {
         for f in 0..31 {
             let sole = feet[0].point(walked.skeleton(), &globals[f * n..(f + 1) * n]);
             assert!((sole.z - sole_z(0.0)).abs() < tolerance, "frame {f}: {sole}");
+        }
+        // Where the root's path is known, it keeps it.
+        let (kept, _) = Cleanup { smoothing: 0.0, keep_root: true, ..Cleanup::default() }.apply(&motion);
+        for f in 0..31 {
+            assert_eq!(motion.translations(f)[0], kept.translations(f)[0], "frame {f}");
         }
     }
 

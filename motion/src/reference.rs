@@ -52,6 +52,17 @@ impl ReferencePose {
             .then(|| ReferencePose { globals: sums.into_iter().map(|s| Quat::from_vec4(s).normalize()).collect() })
     }
 
+    /// A reference pose from each joint's global rotation (as [`ReferencePose::globals`] gives
+    /// them), normalised.
+    pub fn from_globals(globals: impl IntoIterator<Item = Quat>) -> ReferencePose {
+        ReferencePose { globals: globals.into_iter().map(Quat::normalize).collect() }
+    }
+
+    /// Each joint's global rotation in the pose.
+    pub fn globals(&self) -> &[Quat] {
+        &self.globals
+    }
+
     /// The pose of one frame of a motion, turned to face +Z.
     ///
     /// # Panics

@@ -3,18 +3,11 @@
 //! rate of the skeleton file it moves onto. The models run at 30 fps in between.
 
 use anymo_motion::bvh::{self, ReadOptions};
-use anymo_tests::{data_dir, gunzip, models_dir, scratch_dir, succeeded};
+use anymo_tests::{data_dir, gunzip, models_dir, run_anymo, scratch_dir, succeeded};
 use std::path::Path;
-use std::process::Command;
 
 fn anymo(models: &Path, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_anymo"))
-        .args(args)
-        .env("ANYMO_MODELS", models)
-        .env_remove("ANYMO_CHECKPOINTS")
-        .env("RAYON_NUM_THREADS", "1")
-        .output()
-        .expect("the anymo binary runs")
+    run_anymo(env!("CARGO_BIN_EXE_anymo"), models, args)
 }
 
 fn read(path: &Path) -> bvh::Bvh {

@@ -167,6 +167,8 @@ pub struct TokenizerRecipe {
     pub rebase: f64,
     /// Probability of rebasing a window on a frame of any clip of its skeleton.
     pub rebase_other: f64,
+    /// Probability of reading a window against its own clip's mean pose.
+    pub rebase_own: f64,
     /// The joint frames the codec reads motion in.
     pub representation: Representation,
     /// Batches per step, each of one skeleton.
@@ -266,6 +268,7 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
         max_batch_joints: 16 * 24,
         rebase: recipe.rebase,
         rebase_other: recipe.rebase_other,
+        rebase_own: recipe.rebase_own,
         save_every_seconds: run.save_every.as_secs(),
     };
     let mut graph_of = |s: &Skeleton| -> Result<SkeletonGraph> { Ok(SkeletonGraph::new(s, encoder)?) };

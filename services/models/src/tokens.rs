@@ -10,9 +10,12 @@ use crate::quality::{Made, QualityReport, RealMotion, clean_up};
 use anymo_motion::cleanup::Cleanup;
 use anymo_motion::motion::Motion;
 use anymo_motion::prep::clean::{CleanOptions, clean};
+use anymo_motion::reference::ReferencePose;
+use anymo_motion::skeleton::Skeleton;
 use anymo_tokenizer::tat::window::{Tokens, detokenize, tokenize};
 use anymo_tokenizer::tat::{Basis, Representation, Tat, anchor};
 use anymo_tokenizer::text::CachedEncoder;
+use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// The highest frame rate decoded motion is written at.
@@ -29,6 +32,103 @@ pub struct TokenFile {
     pub model_steps: u64,
     /// The tokens.
     pub tokens: Tokens,
+    /// The clip's own mean pose, which the tokens were read against (a tokenizer of the
+    /// reference representation; files from before it existed have none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<PoseCode>,
+}
+
+/// A clip's mean pose, written beside its tokens: the tokens hold the motion around it, and
+/// decoding on the skeleton they came from reads them against it, so a clip comes back in its
+/// own pose whichever file of its rig is the target. On any other skeleton the target's own
+/// pose is used, as for generated tokens.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseCode {
+    /// The cleaned skeleton's joints, in order.
+    pub joints: Vec<PoseJoint>,
+}
+
+/// One joint of a [`PoseCode`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseJoint {
+    /// Its name.
+    pub name: String,
+    /// Its parent's index (none for the root).
+    pub parent: Option<usize>,
+    /// Its rest offset's direction (zero for a joint on its parent), which tells the rig's
+    /// joint-frame convention apart from another rig's with the same names.
+    pub direction: [f32; 3],
+    /// Its end site's direction, for a leaf that has one (the only trace of a leaf's frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub end: Option<[f32; 3]>,
+    /// Its global rotation in the mean pose facing +Z (x, y, z, w), to 4 decimals.
+    pub rotation: [f32; 4],
+}
+
+/// The largest angle between a joint's rest direction in a pose code and in a target for the
+/// code to apply: the same rig, perhaps of other proportions, never another joint-frame
+/// convention (whose rest bones point elsewhere).
+pub const POSE_CODE_DEGREES: f32 = 10.0;
+
+impl PoseCode {
+    /// The code of a reference pose taken on `skeleton` (cleaned).
+    pub fn new(skeleton: &Skeleton, pose: &ReferencePose) -> PoseCode {
+        let round = |x: f32| (x * 1e4).round() / 1e4;
+        let joints = skeleton
+            .joints()
+            .iter()
+            .zip(pose.globals())
+            .map(|(joint, q)| PoseJoint {
+                name: joint.name.clone(),
+                parent: joint.parent,
+                direction: joint.offset.normalize_or_zero().to_array().map(round),
+                end: joint.end_site.map(|e| e.normalize_or_zero().to_array().map(round)),
+                rotation: q.to_array().map(round),
+            })
+            .collect();
+        PoseCode { joints }
+    }
+
+    /// Why a code (perhaps from a client) cannot be read, if it cannot: every rotation must be
+    /// a unit quaternion (to the 4 decimals written) and every direction finite.
+    fn check(&self) -> Result<(), String> {
+        let unit = |q: &[f32; 4]| (Quat::from_array(*q).length() - 1.0).abs() < 1e-2;
+        let finite = |v: &[f32; 3]| v.iter().all(|x| x.is_finite());
+        match self
+            .joints
+            .iter()
+            .find(|j| !unit(&j.rotation) || !finite(&j.direction) || !j.end.as_ref().is_none_or(finite))
+        {
+            Some(joint) => {
+                Err(format!("the pose code of joint {:?} is not a unit rotation with finite directions", joint.name))
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// The pose, when `skeleton` (cleaned) is the one the code was taken on: the same joints,
+    /// parents and, within [`POSE_CODE_DEGREES`], directions of the bones and end sites both
+    /// have.
+    pub fn reference_on(&self, skeleton: &Skeleton) -> Option<ReferencePose> {
+        let cos = POSE_CODE_DEGREES.to_radians().cos();
+        // Bones of no length point nowhere, and files of one rig differ in them (an end site
+        // of length 0 in one, 10 cm in another): only bones both have are compared.
+        let along = |code: [f32; 3], bone: Vec3| {
+            let (a, b) = (Vec3::from_array(code), bone.normalize_or_zero());
+            a.length() < 0.5 || b == Vec3::ZERO || a.dot(b) >= cos
+        };
+        let same = self.joints.len() == skeleton.len()
+            && self.joints.iter().zip(skeleton.joints()).all(|(code, joint)| {
+                let ends = match (code.end, joint.end_site) {
+                    (Some(a), Some(b)) => along(a, b),
+                    _ => true,
+                };
+                // The root's offset is where the file puts the body, not a bone.
+                let bone = joint.parent.is_none() || along(code.direction, joint.offset);
+                code.name == joint.name && code.parent == joint.parent && bone && ends
+            });
+        same.then(|| ReferencePose::from_globals(self.joints.iter().map(|j| Quat::from_array(j.rotation))))
+    }
 }
 
 /// A trained tokenizer with the sentence encoder its skeleton graphs need, the cleanup decoded
@@ -69,23 +169,37 @@ impl TokenCodec {
     }
 
     /// A clip's tokens. A tokenizer of the reference representation reads the clip against
-    /// its own mean pose.
+    /// its own mean pose, which the file carries as its [`PoseCode`].
     pub fn tokenize(&mut self, motion: &Motion) -> Result<TokenFile> {
         let cleaned = cleaned_clip(motion)?;
-        let basis = Basis::of(self.tat.config().representation, cleaned.motion.skeleton(), [&cleaned.motion]);
+        let skeleton = cleaned.motion.skeleton();
+        let (basis, pose) = match Basis::of(self.tat.config().representation, skeleton, [&cleaned.motion]) {
+            Basis::Reference(mean) => {
+                let code = PoseCode::new(skeleton, &mean);
+                // Read against the pose as the file writes it (to 4 decimals), as decoding will.
+                let written = code.reference_on(skeleton).unwrap_or(mean);
+                (Basis::Reference(written), Some(code))
+            }
+            Basis::Rest => (Basis::Rest, None),
+        };
         let entered = basis.enter(&cleaned.motion);
         let graph = Graphs::new(&mut self.encoder).of(entered.skeleton())?;
         let tokens = tokenize(&mut self.tat, &graph, &entered)?;
-        Ok(TokenFile { model: self.name.clone(), model_steps: self.steps, tokens })
+        Ok(TokenFile { model: self.name.clone(), model_steps: self.steps, tokens, pose })
     }
 
-    /// Tokens as motion on `target`'s skeleton (in its units, with its hierarchy and channels)
-    /// at `fps` frames per second, refused when they do not fit this checkpoint or do not
-    /// describe a clip. A tokenizer of the reference representation writes the motion around
-    /// a pose taken from the target (see [`pose_source`]). The motion is
-    /// cleaned up (see [`TokenCodec::set_cleanup`]) and comes with its quality report.
-    pub fn detokenize(&mut self, tokens: &Tokens, target: &Motion, fps: f64) -> Result<Made> {
+    /// A tokens file as motion on `target`'s skeleton (in its units, with its hierarchy and
+    /// channels) at `fps` frames per second, refused when the tokens do not fit this checkpoint
+    /// or do not describe a clip. A tokenizer of the reference representation writes the motion
+    /// around the file's pose code when the target is the skeleton it came from, else around a
+    /// pose taken from the target (see [`pose_source`]). The motion is cleaned up (see
+    /// [`TokenCodec::set_cleanup`]) and comes with its quality report.
+    pub fn detokenize(&mut self, file: &TokenFile, target: &Motion, fps: f64) -> Result<Made> {
+        let tokens = &file.tokens;
         self.check(tokens).map_err(ModelError::Refused)?;
+        if let Some(code) = &file.pose {
+            code.check().map_err(ModelError::Refused)?;
+        }
         if !(fps > 0.0 && fps <= MAX_FPS) {
             return Err(ModelError::refused(format!("the frame rate must be in (0, {MAX_FPS}]; {fps} was asked")));
         }
@@ -95,11 +209,17 @@ impl TokenCodec {
         let source = if target.frames() > 0 { target.slice(0, 1) } else { rest() };
         let cleaned = clean(&posed, &CleanOptions::default())
             .map_err(|r| ModelError::refused(format!("the skeleton cannot be used as a target: {r}")))?;
-        let basis = Basis::of(representation, cleaned.motion.skeleton(), [&cleaned.motion]);
+        let coded = file.pose.as_ref().and_then(|code| code.reference_on(cleaned.motion.skeleton()));
+        let basis = match coded {
+            Some(reference) if representation == Representation::Reference => Basis::Reference(reference),
+            _ => Basis::of(representation, cleaned.motion.skeleton(), [&cleaned.motion]),
+        };
         let skeleton = basis.enter_skeleton(&cleaned.motion);
         let graph = Graphs::new(&mut self.encoder).of(&skeleton)?;
         let decoded = basis.leave(&detokenize(&self.tat, tokens, &graph, &skeleton)?);
-        let (decoded, planting) = clean_up(decoded, self.cleanup.as_ref(), &self.real);
+        // Anchored tokens (a real clip's) carry the root's path: the cleanup keeps it.
+        let cleanup = self.cleanup.map(|c| Cleanup { keep_root: c.keep_root || !tokens.anchors.is_empty(), ..c });
+        let (decoded, planting) = clean_up(decoded, cleanup.as_ref(), &self.real);
         let quality = QualityReport::of(&decoded, planting, self.real.of(&decoded), None);
         let restored = cleaned.restore(&decoded, &source);
         // The models run at MODEL_FPS; the answer comes at the rate asked for.
@@ -150,6 +270,56 @@ impl TokenCodec {
     /// [`TokenCodec::detokenize`] for what the target's frames mean).
     pub fn transfer(&mut self, motion: &Motion, target: &Motion, fps: f64) -> Result<Made> {
         let file = self.tokenize(motion)?;
-        self.detokenize(&file.tokens, target, fps)
+        self.detokenize(&file, target, fps)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use anymo_motion::bvh::parse_str;
+    use anymo_motion::prep::augment::{scale_bones, turn_joint_frames};
+
+    const SWAY: &str = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 1 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n \
+        JOINT LeftLeg\n {\n  OFFSET 0.2 -0.5 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 -0.5 0\n  }\n }\n \
+        JOINT RightLeg\n {\n  OFFSET -0.2 -0.5 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 -0.5 0\n  }\n }\n}\n\
+        MOTION\nFrames: 3\nFrame Time: 0.0333333\n0 1 0 0 10 0 30 0 0 -5 0 0\n0 1 0 0 12 0 35 0 0 -10 0 0\n0 1 0 0 14 0 40 0 0 -15 0 0\n";
+
+    fn sway() -> Motion {
+        Motion::from_bvh(&parse_str(SWAY).unwrap())
+    }
+
+    #[test]
+    fn a_pose_code_gives_its_pose_back_on_its_own_rig_of_any_proportions() {
+        let motion = sway();
+        let mean = ReferencePose::mean_of([&motion]).unwrap();
+        let code = PoseCode::new(motion.skeleton(), &mean);
+        let back = code.reference_on(motion.skeleton()).expect("the skeleton it was taken on");
+        for (a, b) in mean.globals().iter().zip(back.globals()) {
+            let apart = (*a - *b).to_array().iter().fold(0f32, |m, x| m.max(x.abs()));
+            assert!(apart < 2e-4, "{a} against {b}: written to 4 decimals");
+        }
+        let longer = scale_bones(&motion, &[1.0, 1.3, 0.8]);
+        assert!(code.reference_on(longer.skeleton()).is_some(), "other proportions are the same rig");
+        let json = serde_json::to_string(&code).unwrap();
+        assert_eq!(serde_json::from_str::<PoseCode>(&json).unwrap(), code);
+        assert_eq!(code.check(), Ok(()));
+        let mut broken = code.clone();
+        broken.joints[1].rotation = [0.0; 4];
+        assert!(broken.check().unwrap_err().contains("\"LeftLeg\""), "a client's zero rotation is refused by name");
+    }
+
+    #[test]
+    fn a_pose_code_does_not_apply_to_another_rig() {
+        let motion = sway();
+        let code = PoseCode::new(motion.skeleton(), &ReferencePose::mean_of([&motion]).unwrap());
+        // The same names with the legs' frames turned (rest bones pointing elsewhere): another
+        // convention, whose joint rotations the code's would misread.
+        let turns = [Quat::IDENTITY, Quat::from_rotation_z(0.5), Quat::IDENTITY];
+        let turned = turn_joint_frames(&motion, &turns);
+        assert!(code.reference_on(turned.skeleton()).is_none());
+        let renamed = SWAY.replace("LeftLeg", "LeftFin");
+        let other = Motion::from_bvh(&parse_str(&renamed).unwrap());
+        assert!(code.reference_on(other.skeleton()).is_none(), "other joint names");
     }
 }

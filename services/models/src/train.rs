@@ -178,6 +178,10 @@ pub struct CodecTraining {
     /// not record it were trained without).
     #[serde(default)]
     pub rebase_other: f64,
+    /// Probability of reading a window against its own clip's mean pose (cards that do not
+    /// record it were trained without).
+    #[serde(default)]
+    pub rebase_own: f64,
 }
 
 fn one() -> usize {
@@ -245,6 +249,7 @@ pub fn train_codec(
         seed: settings.seed,
         rebase: settings.rebase,
         rebase_other: settings.rebase_other,
+        rebase_own: settings.rebase_own,
         ..LoaderConfig::default()
     };
     let loader = WindowLoader::new(clips, config);

@@ -326,7 +326,7 @@ pub async fn detokenize(
         .generation
         .run(state.limits.timeout, move |m: &mut GenerationModels| {
             m.codec.set_cleanup(cleanup_of(cleanup));
-            m.codec.detokenize(&tokens.tokens, &target, fps).map_err(ApiError::from_model)
+            m.codec.detokenize(&tokens, &target, fps).map_err(ApiError::from_model)
         })
         .await?;
     keep(state, "detokenize", record, vec![made]).await

@@ -41,6 +41,11 @@ pub struct LoaderConfig {
     /// reference of a rig seen only through a user's few files is. 0 draws nothing, so runs
     /// from before it existed sample as they did.
     pub rebase_other: f64,
+    /// Probability of reading a window against the mean pose of its own clip (before the
+    /// rebasings above): motion as `anymo tokenize` reads a user's clip, around that clip's own
+    /// pose rather than its rig's. 0 draws nothing, so runs from before it existed sample as
+    /// they did.
+    pub rebase_own: f64,
     /// Bone lengths are scaled by factors drawn from `[1 - s, 1 + s]` (0 turns it off).
     pub bone_scale: f32,
     /// At most this many joints over all windows of a batch, so batches of large skeletons
@@ -59,6 +64,7 @@ impl Default for LoaderConfig {
             mirror: 0.5,
             rebase: 0.1,
             rebase_other: 0.0,
+            rebase_own: 0.0,
             bone_scale: 0.1,
             max_batch_joints: 512,
         }
@@ -104,6 +110,8 @@ struct Source {
 /// Windows of training clips, batched by skeleton, drawn per step.
 pub struct WindowLoader {
     clips: Vec<Motion>,
+    /// Each clip's own mean pose, when windows are read against it.
+    own_means: Vec<Option<ReferencePose>>,
     groups: Vec<Vec<usize>>,
     sources: Vec<Source>,
     config: LoaderConfig,
@@ -133,7 +141,12 @@ impl WindowLoader {
         }
         let sources = sources.into_values().map(|s| Source { weight: s.weight.sqrt(), ..s }).collect();
         let groups = by_key.into_values().collect();
-        WindowLoader { clips: clips.into_iter().map(|c| c.motion).collect(), groups, sources, config }
+        let clips: Vec<Motion> = clips.into_iter().map(|c| c.motion).collect();
+        let own_means = clips
+            .iter()
+            .map(|clip| if config.rebase_own > 0.0 { ReferencePose::mean_of([clip]) } else { None })
+            .collect();
+        WindowLoader { clips, own_means, groups, sources, config }
     }
 
     /// The number of skeleton groups.
@@ -184,7 +197,7 @@ impl WindowLoader {
             (Vec::with_capacity(b * t * ROOT_DIMS), Vec::with_capacity(b * t * j * ROT_DIMS));
         let mut offsets = Vec::with_capacity(b * j * 3);
         for &(clip, start) in &windows {
-            let motion = self.augment(group, self.clips[clip].slice(start, t), rng);
+            let motion = self.augment(group, clip, self.clips[clip].slice(start, t), rng);
             let (features, _) = to_features(&canonicalise(&motion));
             root.extend_from_slice(&features.root);
             rotations.extend_from_slice(&features.rotations);
@@ -202,8 +215,14 @@ impl WindowLoader {
         })
     }
 
-    /// A window of a clip of skeleton group `group`, augmented as the configuration says.
-    fn augment(&self, group: usize, mut motion: Motion, rng: &mut ChaCha8Rng) -> Motion {
+    /// A window of clip `clip` of skeleton group `group`, augmented as the configuration says.
+    fn augment(&self, group: usize, clip: usize, mut motion: Motion, rng: &mut ChaCha8Rng) -> Motion {
+        if self.config.rebase_own > 0.0
+            && rng.random_bool(self.config.rebase_own)
+            && let Some(own) = &self.own_means[clip]
+        {
+            motion = own.rebase(&motion);
+        }
         if rng.random_bool(self.config.mirror)
             && let Ok(mirrored) = mirror(&motion)
         {
@@ -349,6 +368,38 @@ mod tests {
         assert!(turned > 0, "some bone points another way in the other clip's reference");
         let rotations = |b: &Batch| b.rotations.flatten_all().unwrap().to_vec1::<f32>().unwrap();
         assert_ne!(rotations(&kept), rotations(&rebased));
+    }
+
+    #[test]
+    fn windows_read_against_their_own_clip_sit_around_the_identity() {
+        // A window that is its whole clip (legs swinging 0 to 45 degrees), read against that
+        // clip's mean pose: each leg's rotations average to about no rotation (swinging -22.5
+        // to 22.5 degrees), while against the rest pose they do not.
+        let clips = || vec![from("a", clip("Leg", 16))];
+        let plain = LoaderConfig {
+            window: 16,
+            batch_size: 1,
+            mirror: 0.0,
+            rebase: 0.0,
+            bone_scale: 0.0,
+            ..LoaderConfig::default()
+        };
+        let draw = |config: LoaderConfig| WindowLoader::new(clips(), config).step(0).unwrap().remove(0);
+        let off_identity = |b: &Batch| {
+            let all = b.rotations.squeeze(0).unwrap().to_vec3::<f32>().unwrap();
+            let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+            (1..3)
+                .map(|j| {
+                    let mean: Vec<f32> =
+                        (0..ROT_DIMS).map(|d| all.iter().map(|frame| frame[j][d]).sum::<f32>() / 16.0).collect();
+                    mean.iter().zip(identity).map(|(m, i)| (m - i).abs()).sum::<f32>()
+                })
+                .fold(0.0f32, f32::max)
+        };
+        let (kept, own) = (draw(plain.clone()), draw(LoaderConfig { rebase_own: 1.0, ..plain }));
+        assert_eq!(kept.sources, own.sources, "the same windows");
+        let (from_rest, from_own) = (off_identity(&kept), off_identity(&own));
+        assert!(from_own < from_rest / 5.0, "around their own mean {from_own}, around the rest pose {from_rest}");
     }
 
     #[test]

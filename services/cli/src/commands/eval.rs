@@ -180,8 +180,13 @@ fn run_tokenizer(args: TokenizerArgs, command: &str) -> Result<()> {
     println!("{}", report.markdown);
     if let Some(dir) = &record_in {
         for (name, scores) in report.reconstruction.iter().filter(|(name, _)| args.models.contains(name)) {
+            let cleaned_name = format!("{name}{}", eval::CLEANED);
+            let cleaned = report.reconstruction.iter().find(|(n, _)| *n == cleaned_name).map(|(_, s)| s.clone());
             eval::record(dir, name, |metrics| {
                 metrics["reconstruction"] = serde_json::Value::Object(scores.clone());
+                if let Some(cleaned) = cleaned {
+                    metrics["reconstruction_cleaned_up"] = serde_json::Value::Object(cleaned);
+                }
                 metrics["measured_by"] = command.into();
             })?;
         }

@@ -130,7 +130,7 @@ pub fn run_detokenize(args: DetokenizeArgs) -> Result<()> {
         .with_context(|| format!("{} is not a tokens file from `anymo tokenize`", args.tokens.display()))?;
     let mut codec = load_finishing(&args.model, &args.finish)?;
     let (target, file_fps) = read_target(&args.skeleton)?;
-    let made = codec.detokenize(&file.tokens, &target, args.fps.unwrap_or(file_fps))?;
+    let made = codec.detokenize(&file, &target, args.fps.unwrap_or(file_fps))?;
     write_bvh(&made.motion, &args.output)?;
     print_reports([(args.output.as_path(), &made.quality)])
 }

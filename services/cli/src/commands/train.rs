@@ -181,6 +181,10 @@ struct TokenizerArgs {
     /// against a reference pose taken from other motion, as on a rig known from a few files.
     #[arg(long, default_value_t = LoaderConfig::default().rebase_other)]
     rebase_other: f64,
+    /// Probability of reading a window against its own clip's mean pose, as `anymo tokenize`
+    /// reads a user's clip.
+    #[arg(long, default_value_t = LoaderConfig::default().rebase_own)]
+    rebase_own: f64,
     /// The joint frames the codec reads motion in: `reference` (frames world-aligned at each
     /// skeleton's mean pose, facing +Z: no rig convention shows) or `rest` (each rig's own
     /// frames and BVH rest pose, as tokenizer v1).
@@ -216,6 +220,7 @@ pub fn run(args: Args) -> Result<()> {
                 weights: a.weights,
                 rebase: a.rebase,
                 rebase_other: a.rebase_other,
+                rebase_own: a.rebase_own,
                 representation: a.representation,
                 skeletons_per_step: a.skeletons_per_step,
             };

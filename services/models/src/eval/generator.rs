@@ -7,7 +7,7 @@
 //! humans and animals. Every decoded row comes twice: as the decoder gives it, and after the cleanup users
 //! get by default (`+ cleanup`).
 
-use super::Table;
+use super::{CLEANED, Table};
 use crate::checkpoint::Checkpoints;
 use crate::codecs::{Graphs, bases_by_topology};
 use crate::data::{ModelClip, topology};
@@ -34,9 +34,6 @@ pub const TOKENIZER_ROW: &str = "GT tokens";
 
 /// R-Precision's group size (one true caption among 31 others).
 pub const GROUP: usize = 32;
-
-/// What a row's name gets when its motion went through the default cleanup.
-pub const CLEANED: &str = " + cleanup";
 
 /// A joint moving further than this in one frame at 30 fps (diameters) is a jump.
 pub const JUMP: f32 = 0.1;

@@ -17,6 +17,9 @@ use anyhow::{Context, Result};
 use anymo_tokenizer::nn::load_card;
 use std::path::Path;
 
+/// What a row's name gets when its motion went through the cleanup users get by default.
+pub const CLEANED: &str = " + cleanup";
+
 /// The usable clips of a manifest (at most `limit` per split), with how many cleaning rejected.
 pub fn clips(manifest: &Path, limit: Option<usize>) -> Result<(Vec<ModelClip>, usize)> {
     data::load_manifest(manifest, limit).with_context(|| format!("reading the manifest {}", manifest.display()))

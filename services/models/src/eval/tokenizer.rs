@@ -1,19 +1,22 @@
 //! The tokenizer evaluation of EVAL.md: reconstruction (MPJPE with and without translation,
-//! GeoDist, foot skating, ground penetration, how far the body turns) per split and source,
-//! beside two references that are no model (each clip held in its mean pose, and in its rig's
+//! GeoDist, foot skating, ground penetration, how far the body turns) per split and source, as
+//! decoded and after the cleanup users get by default (`+ cleanup`), beside two references that are no model (each clip held in its mean pose, and in its rig's
 //! rest pose); each model against the mean-pose reference source by source; the same clips on
 //! rigs whose joint frames are turned (the world motion unchanged), which a tokenizer should not
 //! tell apart; for a codec on the reference pose, the same clips read against their own mean
-//! pose (a diagnosis of how much error the held-out reference pose brings); and zero-shot
+//! pose as a tokens file carries it (its pose code); and zero-shot
 //! transfer (cycle consistency, foot skating and ground penetration of transfers, and NEC
 //! appendix F's correlation of pairwise motion distances before and after).
 
-use super::{Table, f};
+use super::{CLEANED, Table, f};
 use crate::card::CodecCard;
 use crate::checkpoint::Checkpoints;
 use crate::codecs::{self, Graphs, bases_by_topology};
 use crate::data::{ModelClip, topology};
+use crate::quality::{RealMotion, clean_up};
+use crate::tokens::PoseCode;
 use anyhow::Result;
+use anymo_motion::cleanup::Cleanup;
 use anymo_motion::features::{canonicalise, foot_joints};
 use anymo_motion::kinematics::all_joint_positions;
 use anymo_motion::metrics::{
@@ -22,6 +25,7 @@ use anymo_motion::metrics::{
 };
 use anymo_motion::motion::Motion;
 use anymo_motion::prep::augment::turn_joint_frames;
+use anymo_motion::reference::ReferencePose;
 use anymo_tokenizer::dataset::Split;
 use anymo_tokenizer::tat::window::{detokenize, reconstruct, tokenize};
 use anymo_tokenizer::tat::{Basis, Codec, Representation, Tat};
@@ -234,30 +238,53 @@ impl Reconstruction {
 }
 
 /// Runs every clip through the codec, each read in its basis (`bases[k]` for `clips[k]`) and
-/// measured back in its rig's own joint frames.
+/// measured back in its rig's own joint frames: as decoded, and with `cleanup`, also after the
+/// cleanup every decoded result gets by default (planted feet standing on the floor `real`
+/// records for the rig, as `anymo detokenize` does).
 pub fn reconstruction(
     codec: &mut dyn Codec,
     graphs: &mut Graphs,
     clips: &[&ModelClip],
     bases: &[Basis],
-    window: usize,
-    overlap: usize,
-) -> Result<Reconstruction> {
-    let mut out = Reconstruction::default();
+    (window, overlap): (usize, usize),
+    cleanup: Option<&RealMotion>,
+) -> Result<Rebuilt> {
+    let mut out = Rebuilt { decoded: Reconstruction::default(), cleaned: cleanup.map(|_| Reconstruction::default()) };
     for (clip, basis) in clips.iter().zip(bases) {
         let entered = basis.enter(&clip.motion);
         let graph = graphs.of(entered.skeleton())?;
-        match reconstruct(codec, &graph, &entered, window, overlap) {
-            Ok(r) => out.groups.entry((clip.split.as_str().to_string(), clip.item.source.clone())).or_default().add(
-                &basis.leave(&r.truth),
-                &basis.leave(&r.anchored),
-                &basis.leave(&r.free),
-                &basis.leave(&r.true_root),
-            ),
-            Err(_) => out.refused += 1,
+        let key = (clip.split.as_str().to_string(), clip.item.source.clone());
+        let Ok(r) = reconstruct(codec, &graph, &entered, window, overlap) else {
+            out.decoded.refused += 1;
+            if let Some(cleaned) = &mut out.cleaned {
+                cleaned.refused += 1;
+            }
+            continue;
+        };
+        let [truth, anchored, free, true_root] = [&r.truth, &r.anchored, &r.free, &r.true_root].map(|m| basis.leave(m));
+        if let (Some(cleaned), Some(real)) = (&mut out.cleaned, cleanup) {
+            // Decoded on the clip's anchors, as `anymo detokenize` decodes a real clip's tokens,
+            // so the root keeps its path.
+            let cleanup = Cleanup { keep_root: true, ..Cleanup::default() };
+            let finish = |m: &Motion| clean_up(m.clone(), Some(&cleanup), real).0;
+            cleaned.groups.entry(key.clone()).or_default().add(
+                &truth,
+                &finish(&anchored),
+                &finish(&free),
+                &finish(&true_root),
+            );
         }
+        out.decoded.groups.entry(key).or_default().add(&truth, &anchored, &free, &true_root);
     }
     Ok(out)
+}
+
+/// A codec's reconstructions of a set of clips, as decoded and after the cleanup.
+pub struct Rebuilt {
+    /// As the decoder gives them.
+    pub decoded: Reconstruction,
+    /// After the default cleanup, when it was asked for.
+    pub cleaned: Option<Reconstruction>,
 }
 
 /// The basis each of `measured` is read in by a codec of `representation`, from clips other
@@ -278,12 +305,20 @@ pub fn held_bases(representation: Representation, all: &[&ModelClip], measured: 
         .collect()
 }
 
-/// Each clip's basis from the clip itself (its own mean pose): a diagnosis, never a headline
-/// figure. Against the held-out bases of [`held_bases`] it tells how much of a codec's error on
-/// a rig comes from the reference pose differing from the clip's own, and how much from the
-/// codec.
-pub fn own_clip_bases(measured: &[&ModelClip]) -> Vec<Basis> {
-    measured.iter().map(|clip| Basis::of(Representation::Reference, clip.motion.skeleton(), [&clip.motion])).collect()
+/// Each clip's basis from its own mean pose as `anymo tokenize` writes it beside the tokens
+/// (its [`PoseCode`]): what a clip's tokens are read against on the rig they came from. Against
+/// the held-out bases of [`held_bases`] (what generated tokens, or tokens without their pose,
+/// are read against) it tells how much of a codec's error is the reference pose differing from
+/// the clip's own, and how much the codec's.
+pub fn pose_code_bases(measured: &[&ModelClip]) -> Vec<Basis> {
+    measured
+        .iter()
+        .map(|clip| {
+            let skeleton = clip.motion.skeleton();
+            let mean = ReferencePose::mean_of([&clip.motion]).expect("a clip has frames");
+            Basis::Reference(PoseCode::new(skeleton, &mean).reference_on(skeleton).unwrap_or(mean))
+        })
+        .collect()
 }
 
 /// A clip held still: every joint but the root keeps its mean local rotation over the clip, and
@@ -469,6 +504,10 @@ pub fn transfer(
     })
 }
 
+/// What a codec's row name gets when each clip is read against its own pose code (see
+/// [`pose_code_bases`]), as a tokens file decodes on its own rig.
+pub const WITH_POSE_CODE: &str = " (with its pose code)";
+
 /// The reference row's name: each clip held in its mean pose (see [`static_pose`]).
 pub const STATIC_REFERENCE: &str = "static pose (reference)";
 /// The other reference row's name: each clip held in its rig's rest pose (see [`rest_hold`]).
@@ -530,6 +569,10 @@ pub fn evaluate_tokenizers(
         Representation::Reference => &reference_bases,
     };
     let reference = held_reference(&eval_clips, &rest_bases, static_pose);
+    // The floors the cleanup stands feet on, from the training clips only (a rig no model saw
+    // gets none, as in `anymo detokenize`).
+    let train: Vec<&ModelClip> = all.iter().copied().filter(|c| c.split == Split::Train).collect();
+    let real = RealMotion::measure(&train);
     let mut tables = Tables::new(&reference);
     let turned_all = if invariance { with_turned_frames(&all) } else { Vec::new() };
     let turned_refs: Vec<&ModelClip> = turned_all.iter().filter(|c| c.split != Split::Train).collect();
@@ -548,18 +591,30 @@ pub fn evaluate_tokenizers(
             CodecCard::Baseline(b) => (BASELINE_WINDOW, BASELINE_OVERLAP, b.baseline.representation),
         };
         let mut graphs = Graphs::new(encoder);
-        let own =
-            self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, bases(representation), window, overlap)?;
+        let windows = (window, overlap);
+        let rebuilt = self::reconstruction(
+            codec.as_mut(),
+            &mut graphs,
+            &eval_clips,
+            bases(representation),
+            windows,
+            Some(&real),
+        )?;
+        let own = rebuilt.decoded;
         reconstruction.push((name.clone(), tables.add(name, &own)?));
+        if let Some(cleaned) = rebuilt.cleaned {
+            let label = format!("{name}{CLEANED}");
+            reconstruction.push((label.clone(), tables.add(&label, &cleaned)?));
+        }
         if representation == Representation::Reference {
-            let own_bases = own_clip_bases(&eval_clips);
-            let rebuilt = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, &own_bases, window, overlap)?;
-            let label = format!("{name} (own-clip reference)");
-            reconstruction.push((label.clone(), tables.add(&label, &rebuilt)?));
+            let coded = pose_code_bases(&eval_clips);
+            let rebuilt = self::reconstruction(codec.as_mut(), &mut graphs, &eval_clips, &coded, windows, None)?;
+            let label = format!("{name}{WITH_POSE_CODE}");
+            reconstruction.push((label.clone(), tables.add(&label, &rebuilt.decoded)?));
         }
         if invariance {
             let on = turned_bases(representation);
-            let turned = self::reconstruction(codec.as_mut(), &mut graphs, &turned_refs, on, window, overlap)?;
+            let turned = self::reconstruction(codec.as_mut(), &mut graphs, &turned_refs, on, windows, None)?.decoded;
             let label = format!("{name} (turned frames)");
             reconstruction.push((label.clone(), tables.add(&label, &turned)?));
             tables.compare_rigs(name, &own, &turned);
