@@ -197,14 +197,7 @@ mod tests {
     /// +Z with its left at +X) whose limbs are named `{side}Up{leg}`, `{side}{leg}`,
     /// `{side}{foot}`, for `frames` frames at 30 fps.
     fn humanoid(leg: &str, foot: &str, frames: usize, frame: impl Fn(usize) -> Frame) -> Motion {
-        let leg = |s: &str, x: f32| {
-            format!(
-                "JOINT {s}Up{leg}\n{{\nOFFSET {x} -0.1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
-                 JOINT {s}{leg}\n{{\nOFFSET 0 -0.4 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
-                 JOINT {s}{foot}\n{{\nOFFSET 0 -0.4 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
-                 End Site\n{{\nOFFSET 0 -0.05 0.15\n}}\n}}\n}}\n}}\n"
-            )
-        };
+        let leg = |s: &str, x: f32| crate::contact::tests::leg_bvh(s, x, leg, foot);
         let arm = |s: &str, x: f32| {
             format!(
                 "JOINT {s}Arm\n{{\nOFFSET {x} 0.35 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\

@@ -222,17 +222,21 @@ pub(crate) mod tests {
     use super::*;
     use crate::bvh::parse_str;
 
+    /// The BVH text of one leg hanging from the hips at `x`: thigh `{side}Up{leg}`, shin
+    /// `{side}{leg}` and foot `{side}{foot}` with a toe end site, soles 0.95 below the hips.
+    pub(crate) fn leg_bvh(side: &str, x: f32, leg: &str, foot: &str) -> String {
+        format!(
+            "JOINT {side}Up{leg}\n{{\nOFFSET {x} -0.1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
+             JOINT {side}{leg}\n{{\nOFFSET 0 -0.4 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
+             JOINT {side}{foot}\n{{\nOFFSET 0 -0.4 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
+             End Site\n{{\nOFFSET 0 -0.05 0.15\n}}\n}}\n}}\n}}\n"
+        )
+    }
+
     /// A biped standing for two frames: hips, two legs of thigh, shin and foot (with a toe end
     /// site), a spine and a head; `{leg}` and `{foot}` name the leg and foot joints.
     pub(crate) fn biped(leg: &str, foot: &str) -> Motion {
-        let side = |s: &str, x: f32| {
-            format!(
-                "JOINT {s}Up{leg}\n{{\nOFFSET {x} -0.1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
-                 JOINT {s}{leg}\n{{\nOFFSET 0 -0.4 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
-                 JOINT {s}{foot}\n{{\nOFFSET 0 -0.4 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n\
-                 End Site\n{{\nOFFSET 0 -0.05 0.15\n}}\n}}\n}}\n}}\n"
-            )
-        };
+        let side = |s: &str, x: f32| leg_bvh(s, x, leg, foot);
         // The root's position channels replace its offset.
         let frame = format!("0 0.95 0 {}", ["0"; 27].join(" "));
         let text = format!(
