@@ -2,6 +2,7 @@
 //! transformer and the length predictor under one set of parameters, and what users ask of it:
 //! generation of any length, inpainting, continuation and prompt chains.
 
+use crate::anchors::CaptionAnchors;
 use crate::autoregressive::Autoregressive;
 use crate::condition::Condition;
 use crate::corpus::{TokenClip, draw_batch};
@@ -119,6 +120,7 @@ pub struct Generator {
     base: Box<dyn TokenModel + Send + Sync>,
     residual: ResidualTransformer,
     length: LengthPredictor,
+    anchors: Option<CaptionAnchors>,
 }
 
 impl Generator {
@@ -134,7 +136,7 @@ impl Generator {
         let residual = ResidualTransformer::new(&mut params, &config.residual, config.layers, config.codes)?;
         let length =
             LengthPredictor::new(&mut params, config.base.skeleton_dim, config.length_hidden, config.max_tokens())?;
-        Ok(Generator { config, params, base, residual, length })
+        Ok(Generator { config, params, base, residual, length, anchors: None })
     }
 
     /// The configuration.
@@ -145,6 +147,26 @@ impl Generator {
     /// The parameters.
     pub fn params(&self) -> &Params {
         &self.params
+    }
+
+    /// Keeps the captions the generator trained on with its weights (saved as buffers, see
+    /// [`crate::anchors`]), so that [`Generator::read_prompt`] reads prompts as them.
+    pub fn set_anchors(&mut self, anchors: CaptionAnchors) -> Result<()> {
+        for (name, tensor) in anchors.to_tensors()? {
+            self.params.set_buffer(name, tensor);
+        }
+        self.anchors = Some(anchors);
+        Ok(())
+    }
+
+    /// The condition a prompt's sentence embedding gives: the nearest caption the generator
+    /// trained on when the prompt is far from all of them (see [`crate::anchors`]), else the
+    /// embedding itself, as for a generator saved without its captions.
+    pub fn read_prompt(&self, text: &[f32]) -> Vec<f32> {
+        match &self.anchors {
+            Some(anchors) => anchors.read(text),
+            None => text.to_vec(),
+        }
     }
 
     /// The parameters, for loading.

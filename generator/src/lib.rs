@@ -4,6 +4,7 @@
 //! token-level editing, caption augmentation for training, and the text-motion evaluator that
 //! scores all of them.
 
+pub mod anchors;
 pub mod autoregressive;
 pub mod condition;
 pub mod corpus;
@@ -17,6 +18,7 @@ pub mod sampling;
 pub mod token_model;
 pub mod trunk;
 
+pub use anchors::CaptionAnchors;
 pub use condition::Condition;
 pub use corpus::{Crop, TokenClip};
 pub use evaluator::{Evaluator, EvaluatorConfig};

@@ -79,6 +79,10 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
         assert_eq!(na, nb);
         assert!(va == vb, "{na} differs between the straight and the resumed run");
     }
+    // The weights keep the distinct captions of the training clips (not their rewordings), which
+    // prompts are read as.
+    let anchors = a.iter().find(|(name, _)| name == "anchors/captions").expect("the captions are kept");
+    assert!(!anchors.1.is_empty() && anchors.1.len() % 384 == 0, "{} values", anchors.1.len());
     // Training reworded the captions and noised the prompts, and the card says so.
     let card: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(ck.join("straight.json")).unwrap()).unwrap();
@@ -134,6 +138,10 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
     let tried: u64 = rigs.iter().map(|r| r["generated"]["straight"]["tried"].as_u64().unwrap()).sum();
     let samples = report["samples"].as_array().unwrap();
     assert!(!rigs.is_empty() && samples.len() as u64 == tried, "{judged}");
+    // Each rig's real clips are judged again after their own tokens are decoded as generated ones.
+    for rig in rigs {
+        assert_eq!(rig["tokens"]["tried"], rig["real"]["tried"], "{rig}");
+    }
     for sample in samples {
         let checks = report["calibration"]["actions"][sample["action"].as_str().unwrap()]["checks"].as_array().unwrap();
         let passes = checks.iter().zip(sample["figures"].as_array().unwrap()).all(|(check, figure)| {

@@ -6,8 +6,9 @@ use super::data::{ModelClip, topology};
 use crate::card::{EvaluatorCard, GeneratorCard};
 use crate::checkpoint::Checkpoint;
 use anyhow::Result;
+use anymo_generator::anchors::{ANCHORS_TENSOR, WITHIN_TENSOR};
 use anymo_generator::paraphrase::{self, Rewording};
-use anymo_generator::{Evaluator, Generator, TokenClip};
+use anymo_generator::{CaptionAnchors, Evaluator, Generator, TokenClip};
 use anymo_tokenizer::nn::ModelCard;
 use anymo_tokenizer::tat::Tat;
 use anymo_tokenizer::tat::window::{detokenize, encode_whole};
@@ -90,12 +91,22 @@ pub fn add_paraphrases(
     Ok(added)
 }
 
-/// Loads a trained generator (`generator`, `generator-ar`, ...).
+/// Loads a trained generator (`generator`, `generator-ar`, ...), with the captions it trained
+/// on when its weights keep them.
 pub fn load_generator(checkpoint: &Checkpoint) -> Result<(Generator, ModelCard<GeneratorCard>)> {
     let card: ModelCard<GeneratorCard> = checkpoint.card("a generator")?;
     let mut generator = Generator::new(card.config.generator.clone(), 0)?;
-    checkpoint.load_into(generator.params_mut())?;
+    let buffers = checkpoint.load_into(generator.params_mut())?;
+    if let (Some(captions), Some(within)) = (buffers.get(ANCHORS_TENSOR), buffers.get(WITHIN_TENSOR)) {
+        generator.set_anchors(CaptionAnchors::from_tensors(captions, within)?)?;
+    }
     Ok((generator, card))
+}
+
+/// The distinct captions of `clips` as a generator's anchors (see [`anymo_generator::anchors`]);
+/// `None` for clips without captions.
+pub fn caption_anchors(clips: &[TokenClip]) -> Option<CaptionAnchors> {
+    CaptionAnchors::new(clips.iter().flat_map(|c| c.text.iter().map(Vec::as_slice)))
 }
 
 /// Loads a trained text-motion evaluator.

@@ -494,9 +494,10 @@ pub struct GeneratorRecipe {
 }
 
 /// Trains a generator on the train split's tokens (captions with their reworded variants) and
-/// ships it.
+/// ships it with the captions (not the variants) as its anchors.
 pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut CachedEncoder) -> Result<PathBuf> {
     let mut corpus = token_corpus(run, &recipe.tokenizer, false, encoder)?;
+    let anchors = generation::caption_anchors(&corpus.clips).context("the training clips have no captions")?;
     let added = generation::add_paraphrases(&mut corpus.clips, recipe.paraphrases, encoder, run.seed)?;
     eprintln!("{added} reworded captions added");
     let (clips, rvq) = (&corpus.clips, corpus.rvq);
@@ -522,6 +523,12 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
         }
         Ok((loss, format!("base {:.3} residual {:.3} length {:.3}", running[0], running[1], running[2])))
     })?;
+    eprintln!(
+        "{name}: a prompt further than cosine {:.3} from all of its {} training captions will be read as the nearest",
+        anchors.within(),
+        anchors.len()
+    );
+    model.set_anchors(anchors)?;
     let card = ModelCard {
         model: name.clone(),
         config: GeneratorCard {

@@ -139,12 +139,13 @@ impl Studio {
         Ok(frames_of(seconds).div_ceil(self.frames_per_token()).max(1))
     }
 
-    /// The sentence embedding of a prompt.
+    /// The generator's condition for a prompt: its sentence embedding, read as the nearest
+    /// caption the generator trained on (see [`anymo_generator::anchors`]).
     pub fn text(&mut self, prompt: &str) -> Result<Vec<f32>> {
         if prompt.trim().is_empty() {
             return Err(refuse("the prompt is empty"));
         }
-        Ok(self.encoder.encode(&[prompt])?.remove(0))
+        Ok(self.generator.read_prompt(&self.encoder.encode(&[prompt])?.remove(0)))
     }
 
     /// A skeleton to animate, from a user's file: the motion is written around a pose taken

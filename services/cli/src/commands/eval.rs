@@ -247,7 +247,7 @@ fn run_prompts(args: PromptsArgs, command: &str) -> Result<()> {
             let rigs: Vec<serde_json::Value> = report
                 .rigs
                 .iter()
-                .map(|r| serde_json::json!({ "rig": r.rig, "split": r.split, "real": r.real, "generated": r.generated.get(name) }))
+                .map(|r| serde_json::json!({ "rig": r.rig, "split": r.split, "real": r.real, "tokens": r.tokens, "generated": r.generated.get(name) }))
                 .collect();
             eval::record(dir, name, |metrics| {
                 metrics["held_out_prompts"] = serde_json::json!({ "rigs": rigs, "measured_by": command });

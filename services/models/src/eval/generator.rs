@@ -168,7 +168,7 @@ fn evaluate(
         for (i, clip) in clips.iter().enumerate() {
             let steps = clip.steps().min(max).min(generator.config().max_tokens());
             let request = Request { steps: Some(steps), samples: 1, sampling, seed: seed.wrapping_add(i as u64) };
-            let codes = generator.generate(&clip.text[0], &clip.skeleton, &request)?.remove(0);
+            let codes = generator.generate(&generator.read_prompt(&clip.text[0]), &clip.skeleton, &request)?.remove(0);
             let [raw, clean] = score(codes, i, Some(*tokenizer), tat)?;
             generated.push(raw);
             generated_clean.push(clean);

@@ -2,7 +2,9 @@
 //! of its action (which way and how fast the body makes headway, turns, feet in the air, hands
 //! over the head, a bowed head), calibrated on the real training clips of that action, then
 //! generated on every human and four-legged rig of the test and zero-shot splits and passed or
-//! failed. The real test clips of each action pass through the same checks: the ceiling.
+//! failed. The real test clips of each action pass through the same checks (the ceiling), and so
+//! do their tokens decoded as generated tokens are (the ceiling a generator on that tokenizer
+//! has).
 //!
 //! The figures come from [`anymo_motion::activity`], on motion cleaned as the models see it, so
 //! a rig's helpers and units do not change them.
@@ -422,6 +424,10 @@ pub struct RigRow {
     pub split: String,
     /// Its real held-out clips of calibrated actions passing their action's checks.
     pub real: Passes,
+    /// The same clips tokenized and decoded as generated tokens are (no root path, the default
+    /// cleanup), through the first generator's tokenizer: what a generator that wrote a real
+    /// clip's tokens would score.
+    pub tokens: Passes,
     /// Each model's generated samples passing their prompt's checks, by checkpoint name.
     pub generated: BTreeMap<String, Passes>,
 }
@@ -433,6 +439,8 @@ pub struct ActionRow {
     pub action: String,
     /// Real held-out clips passing.
     pub real: Passes,
+    /// Their tokens decoded as generated tokens are, passing (see [`RigRow::tokens`]).
+    pub tokens: Passes,
     /// Each model's samples passing, by checkpoint name.
     pub generated: BTreeMap<String, Passes>,
 }
@@ -479,8 +487,9 @@ struct Rig<'a> {
 /// Calibrates the checks on the training clips of `clips`, then generates every held-out prompt
 /// of `prompts` on each human and four-legged rig of the test and zero-shot splits (one sample,
 /// the length the prompt's length predictor gives, the default cleanup, the sampling and seed of
-/// `draw`; prompt `i` gets seed + `i`) with each generator of `models`, and judges samples and
-/// the rigs' real clips.
+/// `draw`; prompt `i` gets seed + `i`) with each generator of `models`, and judges samples, the
+/// rigs' real clips and those clips' own tokens decoded as generated tokens are (through the
+/// first model's tokenizer).
 pub fn evaluate_prompts(
     set: &Checkpoints,
     evaluator: &str,
@@ -526,6 +535,7 @@ pub fn evaluate_prompts(
             body: rig.body,
             split: split.clone(),
             real: Passes::default(),
+            tokens: Passes::default(),
             generated: BTreeMap::new(),
         };
         for (clip, activity) in &rig.clips {
@@ -537,6 +547,32 @@ pub fn evaluate_prompts(
             }
         }
         rows.push(row);
+    }
+
+    if let Some(first) = models.first() {
+        let mut studio = Studio::load(&set.get(first), Some(&set.get(evaluator)), CachedEncoder::new(encoder()?))?;
+        studio.set_scoring(false);
+        for (row, rig) in rows.iter_mut().zip(rigs.values()) {
+            for (clip, _) in &rig.clips {
+                let judged: Vec<&Action> = ACTIONS
+                    .iter()
+                    .filter(|a| a.body == rig.body && shows(a, &clip.item.captions))
+                    .filter(|a| calibration.actions.contains_key(a.name))
+                    .collect();
+                if judged.is_empty() {
+                    continue;
+                }
+                let (target, codes, _) = studio.clip(&clip.motion)?;
+                let made = studio.render(vec![codes], [0.0; 3], None, &target, "")?.remove(0);
+                let activity = measure(&cleaned_clip(&made.motion)?.motion);
+                for action in judged {
+                    if let Some(pass) = calibration.passes(action.name, &activity) {
+                        row.tokens.add(pass);
+                        action_row(&mut by_action, action.name).tokens.add(pass);
+                    }
+                }
+            }
+        }
     }
 
     let mut samples = Vec::new();
@@ -580,6 +616,7 @@ fn action_row<'a>(rows: &'a mut BTreeMap<String, ActionRow>, action: &str) -> &'
     rows.entry(action.to_string()).or_insert_with(|| ActionRow {
         action: action.to_string(),
         real: Passes::default(),
+        tokens: Passes::default(),
         generated: BTreeMap::new(),
     })
 }
@@ -589,19 +626,20 @@ impl PromptReport {
     pub fn markdown(&self, models: &[String]) -> String {
         let cell = |p: &Passes| format!("{:.0}% ({}/{})", 100.0 * p.rate(), p.passed, p.tried);
         let none = Passes::default();
-        let mut headers = vec!["rig", "body", "split", "real clips"];
+        let mut headers = vec!["rig", "body", "split", "real clips", "their tokens"];
         headers.extend(models.iter().map(String::as_str));
         let mut rigs = Table::new(&headers);
         for r in &self.rigs {
-            let mut cells = vec![r.rig.clone(), format!("{:?}", r.body), r.split.clone(), cell(&r.real)];
+            let mut cells =
+                vec![r.rig.clone(), format!("{:?}", r.body), r.split.clone(), cell(&r.real), cell(&r.tokens)];
             cells.extend(models.iter().map(|m| cell(r.generated.get(m).unwrap_or(&none))));
             rigs.row(&cells);
         }
-        let mut headers = vec!["action", "real clips"];
+        let mut headers = vec!["action", "real clips", "their tokens"];
         headers.extend(models.iter().map(String::as_str));
         let mut actions = Table::new(&headers);
         for a in &self.actions {
-            let mut cells = vec![a.action.clone(), cell(&a.real)];
+            let mut cells = vec![a.action.clone(), cell(&a.real), cell(&a.tokens)];
             cells.extend(models.iter().map(|m| cell(a.generated.get(m).unwrap_or(&none))));
             actions.row(&cells);
         }
