@@ -122,7 +122,8 @@ impl Evaluator {
     }
 
     /// Symmetric InfoNCE over a batch of motion latents and their captions' embeddings;
-    /// `same[i][j]` marks pairs whose captions are equal, which are not counted as negatives.
+    /// `same[i][j]` marks pairs where either text is also a caption of the other motion, which are
+    /// not counted as negatives.
     pub fn loss(&self, latent: &Tensor, text: &Tensor, same: &[Vec<bool>]) -> Result<Tensor> {
         let m = self.embed_motion(latent)?;
         let t = self.embed_text(text)?;
@@ -155,13 +156,20 @@ impl Evaluator {
             latent.extend_from_slice(&rows[c.start * d..(c.start + length) * d]);
             text.extend_from_slice(&clip.text[c.caption]);
         }
-        let caption = |c: &Crop| &clips[c.clip].captions[c.caption];
-        let same: Vec<Vec<bool>> =
-            crops.iter().map(|a| crops.iter().map(|b| caption(a) == caption(b)).collect()).collect();
+        let same = not_negatives(clips, &crops);
         let latent = Tensor::from_vec(latent, (batch, length, d), &Device::Cpu)?;
         let text = Tensor::from_vec(text, (batch, TEXT_DIM), &Device::Cpu)?;
         self.loss(&latent, &text, &same)
     }
+}
+
+/// The pairs of a batch that are no negatives of each other: either crop's text is also a
+/// caption of the other's clip. Templated captions ("a man walks") and their rewordings are
+/// shared by many clips, and a text that describes a clip must not be pushed away from it.
+fn not_negatives(clips: &[TokenClip], crops: &[Crop]) -> Vec<Vec<bool>> {
+    let describes =
+        |text: &Crop, motion: &Crop| clips[motion.clip].captions.contains(&clips[text.clip].captions[text.caption]);
+    crops.iter().map(|a| crops.iter().map(|b| describes(a, b) || describes(b, a)).collect()).collect()
 }
 
 fn unit(x: &Tensor) -> Result<Tensor> {
@@ -242,6 +250,25 @@ mod tests {
         assert!(fid(&a, &a).abs() < 1e-6, "{}", fid(&a, &a));
         let shifted: Vec<Vec<f32>> = a.iter().map(|r| vec![r[0] + 2.0, r[1], r[2]]).collect();
         assert!((fid(&a, &shifted) - 4.0).abs() < 1e-4, "{}", fid(&a, &shifted));
+    }
+
+    #[test]
+    fn a_text_that_one_clip_carries_is_no_negative_for_it() {
+        let clip = |captions: &[&str]| TokenClip {
+            key: String::new(),
+            subject: "person".into(),
+            captions: captions.iter().map(|c| c.to_string()).collect(),
+            text: Vec::new(),
+            skeleton: Vec::new(),
+            codes: Vec::new(),
+            latent: Vec::new(),
+            decoded_latent: Vec::new(),
+        };
+        let clips = [clip(&["a man walks", "a guy strolls"]), clip(&["a man walks"]), clip(&["a man waves"])];
+        let crop = |clip: usize, caption: usize| Crop { clip, start: 0, caption };
+        // Clip 0 drew its rewording, which clip 1 lacks; clip 1's caption is also clip 0's.
+        let same = not_negatives(&clips, &[crop(0, 1), crop(1, 0), crop(2, 0)]);
+        assert_eq!(same, vec![vec![true, true, false], vec![true, true, false], vec![false, false, true]]);
     }
 
     #[test]

@@ -117,7 +117,7 @@ impl Weights {
 
 impl Default for Weights {
     /// The weights `anymo eval retrieval --calibrate` chose on the development half of the
-    /// paraphrase benchmark (docs/measurements/retrieval.md): the sentence embeddings lead,
+    /// paraphrase benchmark (docs/measurements/search.md): the sentence embeddings lead,
     /// BM25 counts fully only for queries in the library's own words.
     fn default() -> Weights {
         Weights { bm25: 0.5, captions: 1.0, motions: 0.125, bm25_known_exponent: 4.0 }

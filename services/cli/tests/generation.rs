@@ -88,6 +88,39 @@ fn tiny_generators_train_resume_evaluate_generate_and_edit() {
         serde_json::from_str(&std::fs::read_to_string(ck.join("straight.json")).unwrap()).unwrap();
     assert_eq!(card["config"]["paraphrases"], 4, "{card}");
     assert!((card["config"]["generator"]["text_noise"].as_f64().unwrap() - 0.3).abs() < 1e-6, "{card}");
+
+    // Continuing a generator: from its 6 steps up to 8, its card saying where it came from;
+    // continued at its own steps it takes none and is written again, weights unchanged. Fewer
+    // steps, another shape or other rewording are refused.
+    for ext in ["safetensors", "json"] {
+        std::fs::copy(ck.join(format!("straight.{ext}")), ck.join(format!("more.{ext}"))).unwrap();
+    }
+    let more = |steps: &str, set: &[(&str, &str)]| {
+        let mut options = tiny.to_vec();
+        for (flag, value) in [("--steps", steps)].iter().chain(set) {
+            let at = options.iter().position(|o| o == flag).unwrap();
+            options[at + 1] = value;
+        }
+        train("generator", "more", &[&["--name", "more", "--continue-shipped"][..], &options].concat())
+    };
+    let continued = ok(anymo(&models, &more("8", &[])).output().unwrap());
+    assert!(String::from_utf8_lossy(&continued.stderr).contains("continuing more from step 6"));
+    let card: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ck.join("more.json")).unwrap()).unwrap();
+    assert_eq!((card["steps"].as_u64(), card["config"]["training"]["start"].as_u64()), (Some(8), Some(6)));
+    assert!(card["command"].as_str().unwrap().contains("--text-noise 0.3 && "), "{card}");
+    let eight = tensors(&ck.join("more.safetensors"));
+    assert!(a.iter().zip(&eight).any(|((_, before), (_, now))| before != now), "training went on");
+    let rewritten = ok(anymo(&models, &more("8", &[])).output().unwrap());
+    assert!(String::from_utf8_lossy(&rewritten.stderr).contains("more has 8 steps already: no step to take"));
+    assert!(eight == tensors(&ck.join("more.safetensors")), "no step was taken");
+    let fewer = anymo(&models, &more("7", &[])).output().unwrap();
+    assert!(String::from_utf8_lossy(&fewer.stderr).contains("has 8 steps already"), "{fewer:?}");
+    let wider = anymo(&models, &more("10", &[("--dim", "48")])).output().unwrap();
+    assert!(String::from_utf8_lossy(&wider.stderr).contains("another configuration (differing: "), "{wider:?}");
+    let reworded = anymo(&models, &more("10", &[("--paraphrases", "2")])).output().unwrap();
+    assert!(String::from_utf8_lossy(&reworded.stderr).contains("with --paraphrases 4"), "{reworded:?}");
+
     let ar = [&["--kind", "autoregressive", "--name", "ar"][..], &tiny].concat();
     ok(anymo(&models, &train("generator", "ar", &ar)).output().unwrap());
 

@@ -78,6 +78,10 @@ pub struct EvaluatorCard {
     pub evaluator: EvaluatorConfig,
     /// The training run's settings.
     pub training: StepTraining,
+    /// Reworded variants per caption that training drew among beside the captions (0: the
+    /// captions only, as evaluators trained before caption augmentation).
+    #[serde(default)]
+    pub paraphrases: usize,
 }
 
 /// A model trained on a tokenizer's codes.

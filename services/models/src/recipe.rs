@@ -418,11 +418,13 @@ fn token_corpus(run: &Run, tokenizer: &str, decoded: bool, encoder: &mut CachedE
     })
 }
 
-fn step_settings(run: &Run, steps: u64, lr: f64, batch_size: usize) -> train::StepTraining {
+/// The step loop's settings for a run from `start` (0: a fresh model) up to `steps` in all.
+fn step_settings(run: &Run, steps: u64, start: u64, lr: f64, batch_size: usize) -> train::StepTraining {
     train::StepTraining {
         steps,
+        start,
         lr,
-        warmup: 200.min(steps / 10),
+        warmup: 200.min((steps - start) / 10),
         seed: run.seed,
         batch_size,
         save_every_seconds: run.save_every.as_secs(),
@@ -440,17 +442,22 @@ pub struct EvaluatorRecipe {
     pub batch_size: usize,
     /// Peak learning rate.
     pub lr: f64,
+    /// Reworded variants per caption to train the text side on beside the captions.
+    pub paraphrases: usize,
 }
 
 /// Trains the evaluator contrastively on the train split's latents (half of them from the
-/// clips' own tokens decoded and encoded again) and ships it as `evaluator`.
+/// clips' own tokens decoded and encoded again) against their captions and reworded variants,
+/// and ships it as `evaluator`.
 pub fn train_evaluator(run: &Run, recipe: &EvaluatorRecipe, encoder: &mut CachedEncoder) -> Result<PathBuf> {
-    let corpus = token_corpus(run, &recipe.tokenizer, true, encoder)?;
+    let mut corpus = token_corpus(run, &recipe.tokenizer, true, encoder)?;
+    let added = generation::add_paraphrases(&mut corpus.clips, recipe.paraphrases, encoder, run.seed)?;
+    eprintln!("{added} reworded captions added");
     let clips = &corpus.clips;
     let config = EvaluatorConfig::new(corpus.rvq.dim);
     let mut model = Evaluator::new(config, run.seed)?;
     eprintln!("evaluator: {} parameters", model.params().count());
-    let settings = step_settings(run, recipe.steps, recipe.lr, recipe.batch_size);
+    let settings = step_settings(run, recipe.steps, 0, recipe.lr, recipe.batch_size);
     let mut running = 0f32;
     let state =
         train::train_steps(&mut model, Evaluator::params_mut, &settings, &run.state("evaluator")?, |m, rng| {
@@ -460,7 +467,12 @@ pub fn train_evaluator(run: &Run, recipe: &EvaluatorRecipe, encoder: &mut Cached
         })?;
     let card = ModelCard {
         model: "evaluator".into(),
-        config: EvaluatorCard { trained_on: corpus.trained_on, evaluator: config, training: settings },
+        config: EvaluatorCard {
+            trained_on: corpus.trained_on,
+            evaluator: config,
+            training: settings,
+            paraphrases: recipe.paraphrases,
+        },
         data: corpus.record,
         steps: state.step,
         metrics: serde_json::json!({ "train_seconds": state.seconds }),
@@ -491,6 +503,10 @@ pub struct GeneratorRecipe {
     /// Length of the noise added to prompt embeddings in training (see
     /// [`GeneratorConfig::text_noise`]).
     pub text_noise: f32,
+    /// Go on from the checkpoint of this name in the output folder (its weights, with a fresh
+    /// optimiser and warm-up) up to `steps` in all; at its own steps, take none and write it
+    /// again with its training captions as anchors.
+    pub continue_shipped: bool,
 }
 
 /// Trains a generator on the train split's tokens (captions with their reworded variants) and
@@ -514,21 +530,38 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
     config.text_noise = recipe.text_noise;
     let mut model = Generator::new(config.clone(), run.seed)?;
     eprintln!("{name}: {} parameters", model.params().count());
-    let settings = step_settings(run, recipe.steps, recipe.lr, recipe.batch_size);
-    let mut running = [0f32; 3];
-    let state = train::train_steps(&mut model, Generator::params_mut, &settings, &run.state(&name)?, |m, rng| {
-        let (loss, parts) = m.batch_loss(clips, settings.batch_size, rng)?;
-        for (r, p) in running.iter_mut().zip(parts) {
-            *r += (p - *r) * 0.05;
-        }
-        Ok((loss, format!("base {:.3} residual {:.3} length {:.3}", running[0], running[1], running[2])))
-    })?;
+    let previous = if recipe.continue_shipped {
+        Some(generator_to_continue(&mut model, run, recipe, &name, &corpus)?)
+    } else {
+        None
+    };
+    let start = previous.as_ref().map_or(0, |card| card.steps);
+    let settings = step_settings(run, recipe.steps, start, recipe.lr, recipe.batch_size);
+    let seconds = if start < recipe.steps {
+        let mut running = [0f32; 3];
+        let state = train::train_steps(&mut model, Generator::params_mut, &settings, &run.state(&name)?, |m, rng| {
+            let (loss, parts) = m.batch_loss(clips, settings.batch_size, rng)?;
+            for (r, p) in running.iter_mut().zip(parts) {
+                *r += (p - *r) * 0.05;
+            }
+            Ok((loss, format!("base {:.3} residual {:.3} length {:.3}", running[0], running[1], running[2])))
+        })?;
+        state.seconds
+    } else {
+        eprintln!("{name} has {start} steps already: no step to take");
+        0.0
+    };
     eprintln!(
         "{name}: a prompt further than cosine {:.3} from all of its {} training captions will be read as the nearest",
         anchors.within(),
         anchors.len()
     );
     model.set_anchors(anchors)?;
+    let earlier_seconds = previous.as_ref().and_then(|card| card.metrics["train_seconds"].as_f64()).unwrap_or(0.0);
+    let command = match &previous {
+        Some(card) => format!("{} && {}", card.command, run.command),
+        None => run.command.clone(),
+    };
     let card = ModelCard {
         model: name.clone(),
         config: GeneratorCard {
@@ -538,9 +571,60 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
             paraphrases: recipe.paraphrases,
         },
         data: corpus.record,
-        steps: state.step,
-        metrics: serde_json::json!({ "train_seconds": state.seconds }),
-        command: run.command.clone(),
+        steps: recipe.steps,
+        metrics: serde_json::json!({ "train_seconds": earlier_seconds + seconds }),
+        command,
     };
     run.ship(model.params(), &card, &name)
+}
+
+/// Loads generator `name` of the output folder into `model` to continue it, after checking that
+/// it has the same configuration, writes codes of the same tokenizer weights, was trained on the
+/// same clips with as many reworded captions, and has at most the steps asked for.
+fn generator_to_continue(
+    model: &mut Generator,
+    run: &Run,
+    recipe: &GeneratorRecipe,
+    name: &str,
+    corpus: &TokenCorpus,
+) -> Result<ModelCard<GeneratorCard>> {
+    let checkpoint = Checkpoint::in_dir(&run.out_dir, name);
+    let previous: ModelCard<GeneratorCard> = checkpoint.card("a generator")?;
+    let (was, now) = (serde_json::to_value(&previous.config.generator)?, serde_json::to_value(model.config())?);
+    if was != now {
+        bail!(
+            "{name} in {} was trained with another configuration (differing: {}); continue it with the options \
+             it was trained with",
+            run.out_dir.display(),
+            differing("", &was, &now).join(", ")
+        );
+    }
+    if previous.config.trained_on != corpus.trained_on {
+        bail!(
+            "{name} writes codes of {} (blake3 {}), not of {} in {} (blake3 {}); train a new generator for this \
+             tokenizer",
+            previous.config.trained_on.tokenizer_checkpoint,
+            previous.config.trained_on.tokenizer_blake3,
+            corpus.trained_on.tokenizer_checkpoint,
+            run.out_dir.display(),
+            corpus.trained_on.tokenizer_blake3
+        );
+    }
+    if previous.data != corpus.record {
+        bail!(
+            "{name} was trained on other data ({} clips of {}, blake3 {}); continue it on the same clips",
+            previous.data.clips,
+            previous.data.source,
+            previous.data.manifest_blake3
+        );
+    }
+    if previous.config.paraphrases != recipe.paraphrases {
+        bail!("{name} was trained with --paraphrases {}; continue it with the same", previous.config.paraphrases);
+    }
+    if previous.steps > recipe.steps {
+        bail!("{name} has {} steps already; pass --steps of at least that to continue it", previous.steps);
+    }
+    checkpoint.load_into(model.params_mut())?;
+    eprintln!("continuing {name} from step {}", previous.steps);
+    Ok(previous)
 }

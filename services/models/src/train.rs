@@ -311,8 +311,12 @@ pub fn train_codec(
 /// Settings of a run of the generic step loop.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StepTraining {
-    /// Optimiser steps.
+    /// Optimiser steps in all.
     pub steps: u64,
+    /// Steps of the checkpoint the run continues (0 for a fresh one): the run starts there, and
+    /// its learning rate warms up and decays over the steps after it.
+    #[serde(default)]
+    pub start: u64,
     /// Peak learning rate.
     pub lr: f64,
     /// Warm-up steps.
@@ -336,7 +340,8 @@ pub fn train_steps<M>(
     mut step: impl FnMut(&M, &mut ChaCha8Rng) -> Result<(Tensor, String)>,
 ) -> Result<RunState> {
     let mut optimiser = AdamW::new(params_mut(model), AdamWConfig::default())?;
-    let mut state = RunState::default();
+    // A continued run starts at its checkpoint's step.
+    let mut state = RunState { step: settings.start, ..RunState::default() };
     if let Some((saved, _)) = run.resume(params_mut(model), &mut optimiser)? {
         state = saved;
         eprintln!("resuming at step {}", state.step);
@@ -349,7 +354,7 @@ pub fn train_steps<M>(
         let mut rng = ChaCha8Rng::seed_from_u64(settings.seed ^ state.step.wrapping_mul(0x2545_F491_4F6C_DD1D));
         let (loss, message) = step(model, &mut rng)?;
         let grads = loss.backward()?;
-        let lr = schedule(settings.lr, settings.warmup, settings.steps, state.step);
+        let lr = schedule(settings.lr, settings.warmup, settings.steps - settings.start, state.step - settings.start);
         optimiser.step(params_mut(model), &grads, lr)?;
         state.step += 1;
         state.seconds = started.elapsed().as_secs_f64();

@@ -48,6 +48,10 @@ struct EvaluatorArgs {
     /// Peak learning rate.
     #[arg(long, default_value_t = 3e-4)]
     lr: f64,
+    /// Reworded variants per caption to train the text side on beside the captions (0:
+    /// captions only, as the shipped evaluator).
+    #[arg(long, default_value_t = 0)]
+    paraphrases: usize,
 }
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -91,6 +95,12 @@ struct GeneratorArgs {
     /// was measured with the paraphrases).
     #[arg(long, default_value_t = 0.0)]
     text_noise: f32,
+    /// Continue training the checkpoint of this name in the output folder (the optimiser and the
+    /// learning-rate warm-up start again) up to `--steps` in all. With `--steps` at its own
+    /// steps it takes none and writes the checkpoint again with its training captions, which
+    /// generators trained before they kept them lack.
+    #[arg(long)]
+    continue_shipped: bool,
 }
 
 #[derive(Parser)]
@@ -228,7 +238,13 @@ pub fn run(args: Args) -> Result<()> {
         }
         Model::Evaluator(a) => {
             let (run, mut encoder) = a.common.run()?;
-            let recipe = EvaluatorRecipe { tokenizer: a.tokenizer, steps: a.steps, batch_size: a.batch_size, lr: a.lr };
+            let recipe = EvaluatorRecipe {
+                tokenizer: a.tokenizer,
+                steps: a.steps,
+                batch_size: a.batch_size,
+                lr: a.lr,
+                paraphrases: a.paraphrases,
+            };
             recipe::train_evaluator(&run, &recipe, &mut encoder)?;
         }
         Model::Generator(a) => {
@@ -246,6 +262,7 @@ pub fn run(args: Args) -> Result<()> {
                 dim: a.dim,
                 paraphrases: a.paraphrases,
                 text_noise: a.text_noise,
+                continue_shipped: a.continue_shipped,
             };
             recipe::train_generator(&run, &recipe, &mut encoder)?;
         }
