@@ -120,7 +120,7 @@ impl Default for Weights {
     /// paraphrase benchmark (docs/measurements/search.md): the sentence embeddings lead,
     /// BM25 counts fully only for queries in the library's own words.
     fn default() -> Weights {
-        Weights { bm25: 0.5, captions: 1.0, motions: 0.125, bm25_known_exponent: 4.0 }
+        Weights { bm25: 0.25, captions: 1.0, motions: 0.125, bm25_known_exponent: 4.0 }
     }
 }
 
