@@ -344,6 +344,34 @@ fn differing(path: &str, a: &serde_json::Value, b: &serde_json::Value) -> Vec<St
     }
 }
 
+/// Refuses to continue checkpoint `name`, trained with the model configuration and data of
+/// `was`, as a run with those of `now`: a continued run must build the same model on the same
+/// clips.
+fn same_model_and_data(
+    name: &str,
+    run: &Run,
+    was: (&serde_json::Value, &DataRecord),
+    now: (&serde_json::Value, &DataRecord),
+) -> Result<()> {
+    if was.0 != now.0 {
+        bail!(
+            "{name} in {} was trained with another configuration (differing: {}); continue it with the options \
+             it was trained with",
+            run.out_dir.display(),
+            differing("", was.0, now.0).join(", ")
+        );
+    }
+    if was.1 != now.1 {
+        bail!(
+            "{name} was trained on other data ({} clips of {}, blake3 {}); continue it on the same clips",
+            was.1.clips,
+            was.1.source,
+            was.1.manifest_blake3
+        );
+    }
+    Ok(())
+}
+
 /// Loads checkpoint `name` of the output folder into `codec` to continue it, after checking
 /// that it has the same model configuration (loss weights may differ: they shape the run, not
 /// the model), was trained on the same data, and has fewer steps than asked for.
@@ -363,23 +391,7 @@ fn load_to_continue(
         }
         CodecCard::Baseline(b) => CodecConfig::Baseline { baseline: b.baseline.clone() },
     };
-    let (was, now) = (model_shape(&was)?, model_shape(config)?);
-    if was != now {
-        bail!(
-            "{name} in {} was trained with another configuration (differing: {}); continue it with the options \
-             it was trained with",
-            run.out_dir.display(),
-            differing("", &was, &now).join(", ")
-        );
-    }
-    if previous.data != *data {
-        bail!(
-            "{name} was trained on other data ({} clips of {}, blake3 {}); continue it on the same clips",
-            previous.data.clips,
-            previous.data.source,
-            previous.data.manifest_blake3
-        );
-    }
+    same_model_and_data(name, run, (&model_shape(&was)?, &previous.data), (&model_shape(config)?, data))?;
     if previous.steps >= recipe.steps {
         bail!("{name} has {} steps already; pass --steps above that to continue it", previous.steps);
     }
@@ -591,14 +603,7 @@ fn generator_to_continue(
     let checkpoint = Checkpoint::in_dir(&run.out_dir, name);
     let previous: ModelCard<GeneratorCard> = checkpoint.card("a generator")?;
     let (was, now) = (serde_json::to_value(&previous.config.generator)?, serde_json::to_value(model.config())?);
-    if was != now {
-        bail!(
-            "{name} in {} was trained with another configuration (differing: {}); continue it with the options \
-             it was trained with",
-            run.out_dir.display(),
-            differing("", &was, &now).join(", ")
-        );
-    }
+    same_model_and_data(name, run, (&was, &previous.data), (&now, &corpus.record))?;
     if previous.config.trained_on != corpus.trained_on {
         bail!(
             "{name} writes codes of {} (blake3 {}), not of {} in {} (blake3 {}); train a new generator for this \
@@ -608,14 +613,6 @@ fn generator_to_continue(
             corpus.trained_on.tokenizer_checkpoint,
             run.out_dir.display(),
             corpus.trained_on.tokenizer_blake3
-        );
-    }
-    if previous.data != corpus.record {
-        bail!(
-            "{name} was trained on other data ({} clips of {}, blake3 {}); continue it on the same clips",
-            previous.data.clips,
-            previous.data.source,
-            previous.data.manifest_blake3
         );
     }
     if previous.config.paraphrases != recipe.paraphrases {
