@@ -273,13 +273,8 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
     };
     let mut graph_of = |s: &Skeleton| -> Result<SkeletonGraph> { Ok(SkeletonGraph::new(s, encoder)?) };
     let state = train::train_codec(codec.as_mut(), motions, &mut graph_of, &settings, &run.state(&name)?)?;
-    let earlier_seconds = previous.as_ref().and_then(|card| card.metrics["train_seconds"].as_f64()).unwrap_or(0.0);
-    let (data, steps, metrics) =
-        (data, state.step, serde_json::json!({ "train_seconds": earlier_seconds + state.seconds }));
-    let command = match &previous {
-        Some(card) => format!("{} && {}", card.command, run.command),
-        None => run.command.clone(),
-    };
+    let (command, metrics) = lineage(run, previous.as_ref(), state.seconds);
+    let steps = state.step;
     match config {
         CodecConfig::Tokenizer { owo_checkpoint, tokenizer } => {
             let config = TokenizerCard { owo_checkpoint, tokenizer, training: settings };
@@ -342,6 +337,17 @@ fn differing(path: &str, a: &serde_json::Value, b: &serde_json::Value) -> Vec<St
         _ if a == b => Vec::new(),
         _ => vec![path.to_string()],
     }
+}
+
+/// A run's card command and metrics: a continued run's command lists every run that made the
+/// checkpoint, and its training time adds to theirs.
+fn lineage<C>(run: &Run, previous: Option<&ModelCard<C>>, seconds: f64) -> (String, serde_json::Value) {
+    let earlier = previous.and_then(|card| card.metrics["train_seconds"].as_f64()).unwrap_or(0.0);
+    let command = match previous {
+        Some(card) => format!("{} && {}", card.command, run.command),
+        None => run.command.clone(),
+    };
+    (command, serde_json::json!({ "train_seconds": earlier + seconds }))
 }
 
 /// Refuses to continue checkpoint `name`, trained with the model configuration and data of
@@ -569,11 +575,7 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
         anchors.len()
     );
     model.set_anchors(anchors)?;
-    let earlier_seconds = previous.as_ref().and_then(|card| card.metrics["train_seconds"].as_f64()).unwrap_or(0.0);
-    let command = match &previous {
-        Some(card) => format!("{} && {}", card.command, run.command),
-        None => run.command.clone(),
-    };
+    let (command, metrics) = lineage(run, previous.as_ref(), seconds);
     let card = ModelCard {
         model: name.clone(),
         config: GeneratorCard {
@@ -584,7 +586,7 @@ pub fn train_generator(run: &Run, recipe: &GeneratorRecipe, encoder: &mut Cached
         },
         data: corpus.record,
         steps: recipe.steps,
-        metrics: serde_json::json!({ "train_seconds": earlier_seconds + seconds }),
+        metrics,
         command,
     };
     run.ship(model.params(), &card, &name)

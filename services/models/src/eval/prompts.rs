@@ -309,6 +309,11 @@ fn shows(action: &Action, captions: &[String]) -> bool {
     captions.iter().any(|c| (action.describes)(&c.to_lowercase()))
 }
 
+/// The actions of `body` that a clip with these captions shows.
+fn shown<'a>(body: Body, captions: &'a [String]) -> impl Iterator<Item = &'static Action> + 'a {
+    ACTIONS.iter().filter(move |a| a.body == body && shows(a, captions))
+}
+
 /// One check with its threshold.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Threshold {
@@ -539,7 +544,7 @@ pub fn evaluate_prompts(
             generated: BTreeMap::new(),
         };
         for (clip, activity) in &rig.clips {
-            for action in ACTIONS.iter().filter(|a| a.body == rig.body && shows(a, &clip.item.captions)) {
+            for action in shown(rig.body, &clip.item.captions) {
                 if let Some(pass) = calibration.passes(action.name, activity) {
                     row.real.add(pass);
                     action_row(&mut by_action, action.name).real.add(pass);
@@ -554,11 +559,8 @@ pub fn evaluate_prompts(
         studio.set_scoring(false);
         for (row, rig) in rows.iter_mut().zip(rigs.values()) {
             for (clip, _) in &rig.clips {
-                let judged: Vec<&Action> = ACTIONS
-                    .iter()
-                    .filter(|a| a.body == rig.body && shows(a, &clip.item.captions))
-                    .filter(|a| calibration.actions.contains_key(a.name))
-                    .collect();
+                let judged: Vec<&Action> =
+                    shown(rig.body, &clip.item.captions).filter(|a| calibration.actions.contains_key(a.name)).collect();
                 if judged.is_empty() {
                     continue;
                 }
