@@ -102,7 +102,9 @@ fn rest_and_grpc_serve_every_capability() {
     let (Some(shared), Some(models)) = (data_dir(), models_dir()) else { return };
     let scratch = scratch_dir("server");
     let data = ingested_library(&shared, &models, &scratch);
-    let server = serve(&data, &models, &["--max-body-bytes", "300000"], &[]);
+    // Two search models' threads on any machine, so that queries sent at once (below) are
+    // shared between them.
+    let server = serve(&data, &models, &["--max-body-bytes", "300000", "--search-workers", "2"], &[]);
     let base = server.base.clone();
     let husky_path = shared.join("quaternius/bvh/animals_pack/Husky__Walk.bvh.gz");
     let husky = clip_text(&husky_path);

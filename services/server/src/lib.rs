@@ -137,8 +137,10 @@ impl Server {
         let (search_models, library) = {
             let c = config.clone();
             tokio::task::spawn_blocking(move || -> Result<_> {
-                let models = SearchModels::load(&c.checkpoints.get(&c.evaluator), encoder(&c)?)?;
-                let library = open_library(&c.data_dir, &models)?;
+                let models = (0..c.limits.search_workers.max(1))
+                    .map(|_| SearchModels::load(&c.checkpoints.get(&c.evaluator), encoder(&c)?))
+                    .collect::<Result<Vec<_>>>()?;
+                let library = open_library(&c.data_dir, &models[0])?;
                 Ok((models, library))
             })
             .await??

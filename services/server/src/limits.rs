@@ -23,6 +23,8 @@ pub struct Limits {
     pub queue: usize,
     /// Generation workers (each loads its own models and runs one request at a time).
     pub workers: usize,
+    /// Search models' threads (each loads its own encoder and embeds one batch at a time).
+    pub search_workers: usize,
     /// Longest a request may take, waiting included.
     pub timeout: Duration,
 }
@@ -37,10 +39,17 @@ impl Default for Limits {
             samples: 8,
             files: 1_000,
             queue: 16,
-            workers: 1,
+            workers: cores(),
+            search_workers: cores(),
             timeout: Duration::from_secs(120),
         }
     }
+}
+
+/// The cores this process may use: `anymo serve` runs each model call on one thread and as many
+/// workers as cores, which keeps more of the machine busy than one call on every core.
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
 }
 
 impl Limits {

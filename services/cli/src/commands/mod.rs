@@ -58,6 +58,17 @@ enum Command {
 }
 
 impl Cli {
+    /// The threads each model call's matrix products use: one for `serve`, whose workers (one
+    /// per core) run calls side by side, which embeds 1.3x the queries one encoder on every
+    /// core does (`cargo bench --workspace --bench sentence_encoder`); every core for the other
+    /// commands, which make one call at a time.
+    pub fn threads_per_call(&self, cores: usize) -> usize {
+        match self.command {
+            Command::Serve(_) => 1,
+            _ => cores,
+        }
+    }
+
     /// Runs the chosen subcommand.
     pub fn run(self) -> Result<()> {
         match self.command {

@@ -43,9 +43,14 @@ pub struct Args {
     /// Generation requests that may wait; more are answered 429.
     #[arg(long, default_value_t = Limits::default().queue)]
     queue: usize,
-    /// Generation workers (each runs one request at a time with its own models).
+    /// Generation workers (each runs one request at a time with its own models; default: one
+    /// per core).
     #[arg(long, default_value_t = Limits::default().workers)]
     workers: usize,
+    /// Search models' threads (each embeds one batch of queries at a time with its own sentence
+    /// encoder; default: one per core).
+    #[arg(long, default_value_t = Limits::default().search_workers)]
+    search_workers: usize,
     /// Longest a request may take, in seconds, waiting included.
     #[arg(long, default_value_t = Limits::default().timeout.as_secs())]
     timeout_seconds: u64,
@@ -128,6 +133,7 @@ pub fn run(args: Args) -> Result<()> {
             files: args.max_files,
             queue: args.queue,
             workers: args.workers.max(1),
+            search_workers: args.search_workers.max(1),
             timeout: Duration::from_secs(args.timeout_seconds.max(1)),
         },
         keys: ApiKeys::new(&args.api_keys, args.keys_for_generate),

@@ -1,7 +1,7 @@
 //! Search as the server offers it, built to keep up with many clients on few cores:
 //! - the query texts that arrive together are embedded in one batch of the sentence encoder by
-//!   one models' thread ([`models_thread`]), which also embeds example clips and is the index's
-//!   only writer;
+//!   one of the models' threads, one per core ([`models_thread`]), which also embed example
+//!   clips and are the index's only writers;
 //! - the index is shared behind a read-write lock and searched by one reader per core;
 //! - queries that arrive together share one read of the store's clip signature
 //!   ([`signature`]); when it differs from the one the index was synced to (another request,
@@ -32,7 +32,7 @@ use std::sync::{Arc, Mutex, PoisonError, RwLock};
 use tokio::runtime::Handle;
 use tokio::sync::Semaphore;
 
-/// Search requests that may wait for the models' thread.
+/// Search requests that may wait for the models' threads.
 const QUEUE: usize = 64;
 
 /// Everything a search needs, shared by all requests.
@@ -46,11 +46,11 @@ pub struct SearchService {
 }
 
 impl SearchService {
-    /// Starts the models' thread over `library`, fed from `store`, and asks it to sync the index
-    /// with the store before the first query needs it. `vectors` bounds the query vectors kept;
-    /// `batch_texts` observes the texts of each embedding batch.
+    /// Starts a models' thread for each set of `models` over `library`, fed from `store`, and
+    /// asks them to sync the index with the store before the first query needs it. `vectors`
+    /// bounds the query vectors kept; `batch_texts` observes the texts of each embedding batch.
     pub fn start(
-        models: SearchModels,
+        models: Vec<SearchModels>,
         library: Library,
         store: Store,
         runtime: Handle,
@@ -77,7 +77,7 @@ impl SearchService {
         read(&self.library).len()
     }
 
-    /// Search jobs waiting for the models' thread.
+    /// Search jobs waiting for the models' threads.
     pub fn waiting(&self) -> usize {
         self.models.waiting()
     }

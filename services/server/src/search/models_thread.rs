@@ -1,8 +1,11 @@
-//! The search models' thread. The sentence encoder, the tokenizer and the evaluator hold caches
-//! and are used through `&mut`, and one batch of the encoder costs far less than its texts one
-//! at a time, so one thread owns them. It embeds the query texts that wait together in one
-//! batch, embeds example clips, and keeps the shared index in step with the store (it is the
-//! index's only writer).
+//! The search models' threads. The sentence encoder, the tokenizer and the evaluator hold caches
+//! and are used through `&mut`, so each thread owns a set of them; one batch of the encoder
+//! costs far less than its texts one at a time, and two encoders side by side, one per core,
+//! embed more than one encoder on both cores (`cargo bench --workspace --bench
+//! sentence_encoder`). So there is one thread per core, taking jobs from one queue: a thread
+//! gathers the query texts that wait together into one batch while the others embed theirs.
+//! The threads also embed example clips and keep the shared index in step with the store (one
+//! at a time: they are the index's only writers).
 
 use super::signature::Signature;
 use crate::error::ApiError;
@@ -49,6 +52,8 @@ struct Shared {
     waiting: AtomicUsize,
     /// The store's signature the index was last synced to.
     synced: Mutex<Option<Signature>>,
+    /// Held by the thread syncing the index, so that syncs run one at a time.
+    syncing: Mutex<()>,
 }
 
 impl Shared {
@@ -57,7 +62,7 @@ impl Shared {
     }
 }
 
-/// A handle on the models' thread.
+/// A handle on the models' threads.
 pub struct ModelsThread {
     jobs: SyncSender<Job>,
     capacity: usize,
@@ -78,7 +83,7 @@ impl ModelsThread {
     /// Starts the thread over `library`, fed from `store` (its queries run on `runtime`); up to
     /// `capacity` jobs wait for it. `batch_texts` observes the texts of every batch.
     pub fn start(
-        models: SearchModels,
+        models: Vec<SearchModels>,
         library: Arc<RwLock<Library>>,
         store: Store,
         runtime: Handle,
@@ -86,9 +91,20 @@ impl ModelsThread {
         batch_texts: Histogram,
     ) -> std::io::Result<ModelsThread> {
         let (jobs, taken) = sync_channel(capacity);
+        let taken = Arc::new(Mutex::new(taken));
         let shared = Arc::new(Shared::default());
-        let owner = Owner { models, library, store, runtime, shared: shared.clone(), batch_texts };
-        std::thread::Builder::new().name("anymo-search-models".into()).spawn(move || owner.run(taken))?;
+        for (k, models) in models.into_iter().enumerate() {
+            let owner = Owner {
+                models,
+                library: library.clone(),
+                store: store.clone(),
+                runtime: runtime.clone(),
+                shared: shared.clone(),
+                batch_texts: batch_texts.clone(),
+            };
+            let taken = taken.clone();
+            std::thread::Builder::new().name(format!("anymo-search-models-{k}")).spawn(move || owner.run(&taken))?;
+        }
         Ok(ModelsThread { jobs, capacity, shared })
     }
 
@@ -169,12 +185,20 @@ async fn answered<T>(answer: oneshot::Receiver<Result<T, ApiError>>) -> Result<T
 }
 
 impl Owner {
-    fn run(mut self, jobs: Receiver<Job>) {
-        while let Ok(first) = jobs.recv() {
+    /// Takes jobs until the queue closes. The queue is held while a batch is gathered, so one
+    /// thread gathers at a time and the others work.
+    fn run(mut self, jobs: &Mutex<Receiver<Job>>) {
+        loop {
             let (mut texts, mut others) = (Vec::new(), Vec::new());
-            self.take(first, &mut texts, &mut others);
+            {
+                let jobs = jobs.lock().unwrap_or_else(PoisonError::into_inner);
+                let Ok(first) = jobs.recv() else { return };
+                self.take(first, &mut texts, &mut others);
+                if !texts.is_empty() {
+                    self.gather(&jobs, &mut texts, &mut others);
+                }
+            }
             if !texts.is_empty() {
-                self.gather(&jobs, &mut texts, &mut others);
                 self.guarded(|owner| owner.embed(texts));
             }
             for task in others {
@@ -200,7 +224,9 @@ impl Owner {
     }
 
     /// Adds to the batch the texts already queued, and those announced that come within
-    /// [`BATCH_WAIT`]; other jobs queued meanwhile run after the batch.
+    /// [`BATCH_WAIT`]; other jobs queued meanwhile run after the batch. (Splitting the pending
+    /// texts between the threads instead gave no more queries per second: larger batches
+    /// embed each text for less.)
     fn gather(&self, jobs: &Receiver<Job>, texts: &mut Vec<(String, Answer<TextVectors>)>, others: &mut Vec<Task>) {
         let deadline = Instant::now() + BATCH_WAIT;
         while texts.len() < MAX_BATCH {
@@ -266,6 +292,8 @@ impl Owner {
 
     /// Syncs the index with the store unless it already reflects the store's signature.
     fn sync(&mut self) -> Result<(), ApiError> {
+        let shared = self.shared.clone();
+        let _syncing = shared.syncing.lock().unwrap_or_else(PoisonError::into_inner);
         let signature = self.runtime.block_on(self.store.clips_signature())?;
         if self.shared.synced() == Some(signature) {
             return Ok(());
