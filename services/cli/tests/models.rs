@@ -118,9 +118,17 @@ fn tiny_training_resumes_exactly_evaluates_and_transfers() {
 
     let baseline = with(
         with(vec!["train".into(), "tokenizer".into()], &strs(&common("baseline"))),
-        &["--variant", "baseline", "--steps", "3", "--batch-size", "4"],
+        &["--variant", "baseline", "--steps", "3", "--batch-size", "4", "--width", "32"],
     );
     ok(anymo(&models, &strs(&baseline)).output().unwrap());
+    let card: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ck/baseline.json")).unwrap()).unwrap();
+    assert_eq!(card["config"]["baseline"]["dim"].as_u64(), Some(32), "{card}");
+    // The width is the baseline's: TAT refuses it rather than ignore it.
+    let tat_width = anymo(&models, &["train", "tokenizer", "--variant", "tat", "--width", "32"]).output().unwrap();
+    assert!(!tat_width.status.success());
+    let said = String::from_utf8_lossy(&tat_width.stderr);
+    assert!(said.contains("--width sets the baseline's trunk"), "{said}");
     let results = dir.join("eval.json");
     ok(anymo(
         &models,

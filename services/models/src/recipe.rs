@@ -125,9 +125,15 @@ pub enum Variant {
     TatAdditive,
     /// TAT over an OwO that was never pretrained (frozen at initialisation).
     TatScratch,
-    /// The zero-padded RVQ-VAE of NEC Table 1.
-    Baseline,
+    /// The zero-padded RVQ-VAE of NEC Table 1, its convolutional trunk `width` channels wide.
+    Baseline {
+        /// Channels of the trunk ([`BASELINE_WIDTH`] unless told).
+        width: usize,
+    },
 }
+
+/// The baseline's trunk width as first trained (tokenizer v1's `baseline`).
+pub const BASELINE_WIDTH: usize = 256;
 
 impl Variant {
     /// The checkpoint name a run of this variant ships under by default.
@@ -136,7 +142,7 @@ impl Variant {
             Variant::Tat => "tat",
             Variant::TatAdditive => "tat-additive",
             Variant::TatScratch => "tat-scratch",
-            Variant::Baseline => "baseline",
+            Variant::Baseline { .. } => "baseline",
         }
     }
 }
@@ -219,12 +225,12 @@ pub fn train_tokenizer(run: &Run, recipe: &TokenizerRecipe, encoder: &mut Cached
     let global = encoder.encode(&[GLOBAL_NODE_TEXT])?.remove(0);
     let mut owo_params = Params::new(0);
     let (mut codec, config): (Box<dyn Codec>, CodecConfig) = match recipe.variant {
-        Variant::Baseline => {
+        Variant::Baseline { width } => {
             let max_joints = clips.iter().map(|c| c.motion.skeleton().len()).max().unwrap_or(1);
             let upsampling = Upsampling::Interpolate;
             let config = BaselineConfig {
                 max_joints,
-                dim: 256,
+                dim: width,
                 blocks: 2,
                 upsampling,
                 rvq,

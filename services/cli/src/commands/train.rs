@@ -3,7 +3,7 @@
 //! checkpoint with its model card.
 
 use super::context::{StoreArgs, writable_checkpoints};
-use anyhow::Result;
+use anyhow::{Result, bail};
 use anymo_generator::generate::Kind;
 use anymo_models::checkpoint::DEFAULT_TOKENIZER;
 use anymo_models::recipe::{self, EvaluatorRecipe, GeneratorRecipe, Run, TokenizerRecipe};
@@ -203,6 +203,11 @@ struct TokenizerArgs {
     /// Batches per optimiser step, each of one skeleton.
     #[arg(long, default_value_t = 2)]
     skeletons_per_step: usize,
+    /// The baseline's trunk width in channels (only with `--variant baseline`; default 256, as
+    /// v1's baseline). A run's state is about 12 bytes per parameter: 128 keeps it under the
+    /// 20 MB a run may commit.
+    #[arg(long)]
+    width: Option<usize>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -212,13 +217,16 @@ pub fn run(args: Args) -> Result<()> {
             recipe::train_owo(&run, a.steps, &mut encoder)?;
         }
         Model::Tokenizer(a) => {
+            if a.width.is_some() && a.variant != Variant::Baseline {
+                bail!("--width sets the baseline's trunk; TAT's widths are fixed (leave --width out)");
+            }
             let (run, mut encoder) = a.common.run()?;
             let recipe = TokenizerRecipe {
                 variant: match a.variant {
                     Variant::Tat => recipe::Variant::Tat,
                     Variant::TatAdditive => recipe::Variant::TatAdditive,
                     Variant::TatScratch => recipe::Variant::TatScratch,
-                    Variant::Baseline => recipe::Variant::Baseline,
+                    Variant::Baseline => recipe::Variant::Baseline { width: a.width.unwrap_or(recipe::BASELINE_WIDTH) },
                 },
                 name: a.name,
                 steps: a.steps,
