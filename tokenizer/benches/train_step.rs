@@ -13,7 +13,6 @@ use anymo_tokenizer::owo::graph::{NODE_INPUT_DIM, SkeletonGraph};
 use anymo_tokenizer::tat::objective::{Prepared, RootStats, loss};
 use anymo_tokenizer::tat::{Codec, Fusion, Representation, Tat, TokenizerConfig};
 use anymo_tokenizer::text::EMBEDDING_DIM;
-use candle_core::{Device, Tensor};
 use rand::SeedableRng;
 use std::time::Instant;
 
@@ -52,19 +51,6 @@ fn humanoid(frames: usize) -> Motion {
         text.push('\n');
     }
     Motion::from_bvh(&parse_str(&text).expect("a valid humanoid"))
-}
-
-fn matmul_rate() -> f64 {
-    let n = 1024;
-    let a = Tensor::ones((n, n), candle_core::DType::F32, &Device::Cpu).unwrap();
-    let b = Tensor::ones((n, n), candle_core::DType::F32, &Device::Cpu).unwrap();
-    a.matmul(&b).unwrap();
-    let reps = 20;
-    let t = Instant::now();
-    for _ in 0..reps {
-        a.matmul(&b).unwrap();
-    }
-    (2 * n * n * n * reps) as f64 / t.elapsed().as_secs_f64()
 }
 
 fn main() {
@@ -112,7 +98,7 @@ fn main() {
     let seconds = t.elapsed().as_secs_f64() / steps as f64;
     let step_flops = 3.0 * flops::take() as f64 / steps as f64;
     let step_rate = step_flops / seconds;
-    let reference = matmul_rate();
+    let reference = flops::dense_matmul_rate().unwrap();
     println!("threads: {threads}; batch: 16 windows x 64 frames x {joints} joints; TAT default configuration");
     println!("training step: {:.3} s, {:.2} GFLOP (matmuls, forward + backward)", seconds, step_flops / 1e9);
     let [forward, backward, optimiser] = phases.map(|p| p / steps as f64);

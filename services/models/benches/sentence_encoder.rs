@@ -6,10 +6,11 @@
 //! a lower bound on the work done.
 //!
 //! `cargo bench --workspace --bench sentence_encoder` after `bash tools/setup.sh --models`
-//! (RAYON_NUM_THREADS sets the threads; the `anymo` binary uses 2 unless told).
+//! (RAYON_NUM_THREADS sets the threads; `anymo serve` runs each model call on one, the other
+//! commands on every core).
 
+use anymo_tokenizer::nn::flops;
 use anymo_tokenizer::text::{EMBEDDING_DIM, SentenceEncoder};
-use candle_core::{DType, Device, Tensor};
 use std::time::{Duration, Instant};
 
 /// Queries as search users type them; a number makes every text new.
@@ -27,19 +28,6 @@ fn encoder_flops(texts: usize, tokens: usize) -> f64 {
     let projections = 4.0 * d * d + 2.0 * d * FEED_FORWARD as f64;
     let attention = 2.0 * tokens as f64 * d;
     2.0 * LAYERS as f64 * rows * (projections + attention)
-}
-
-fn matmul_rate() -> f64 {
-    let n = 1024;
-    let a = Tensor::ones((n, n), DType::F32, &Device::Cpu).unwrap();
-    let b = Tensor::ones((n, n), DType::F32, &Device::Cpu).unwrap();
-    a.matmul(&b).unwrap();
-    let reps = 20;
-    let t = Instant::now();
-    for _ in 0..reps {
-        a.matmul(&b).unwrap();
-    }
-    (2 * n * n * n * reps) as f64 / t.elapsed().as_secs_f64()
 }
 
 /// Texts per second and FLOP/s over batches of `batch` new texts for 5 seconds; `tokens` gives
@@ -74,7 +62,7 @@ fn main() {
         encodings.iter().map(|e| e.get_attention_mask().iter().filter(|&&m| m == 1).count()).max().unwrap_or(0)
     };
     encoder.encode(&["warm up"]).unwrap();
-    let reference = matmul_rate();
+    let reference = flops::dense_matmul_rate().unwrap();
     println!("threads: {threads}; queries like \"{} 123\"", QUERIES[0]);
     for batch in [1, 16] {
         let (texts, flops) = rate(&encoder, &tokens, batch);
