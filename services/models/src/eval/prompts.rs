@@ -14,7 +14,7 @@ use crate::checkpoint::Checkpoints;
 use crate::data::ModelClip;
 use crate::generation::is_human;
 use crate::quality::skeleton_key;
-use crate::studio::{Studio, cleaned_clip};
+use crate::studio::Studio;
 use anyhow::{Context, Result};
 use anymo_generator::Request;
 use anymo_motion::activity::{Activity, measure};
@@ -566,7 +566,7 @@ pub fn evaluate_prompts(
                 }
                 let (target, codes, _) = studio.clip(&clip.motion)?;
                 let made = studio.render(vec![codes], [0.0; 3], None, &target, "")?.remove(0);
-                let activity = measure(&cleaned_clip(&made.motion)?.motion);
+                let activity = measure(&made.motion);
                 for action in judged {
                     if let Some(pass) = calibration.passes(action.name, &activity) {
                         row.tokens.add(pass);
@@ -592,7 +592,7 @@ pub fn evaluate_prompts(
                 }
                 let request = Request { steps: None, samples: 1, sampling, seed: seed.wrapping_add(i as u64) };
                 let made = studio.generate_motion(&prompt.text, &target, None, &request)?.remove(0);
-                let activity = measure(&cleaned_clip(&made.motion)?.motion);
+                let activity = measure(&made.motion);
                 let Some(pass) = calibration.passes(action.name, &activity) else { continue };
                 passes.add(pass);
                 samples.push(Sample {
