@@ -1,5 +1,5 @@
-//! The sentence encoder's rate on short queries, in texts per second, one at a time and in a
-//! batch of 16 (what a search server embeds when 16 clients ask together), and its achieved
+//! The sentence encoder's rate on short queries, in texts per second, one at a time, in a batch
+//! of 4 (about what a search server gathers under load) and of 16 (when 16 clients ask together), and its achieved
 //! FLOP/s against this machine's dense matmul rate measured in the same run with the same
 //! threads. The FLOPs counted are the encoder's matmuls (projections, feed-forward and
 //! attention, on the batch's padded tokens); element-wise work is not counted, so the figure is
@@ -64,7 +64,7 @@ fn main() {
     encoder.encode(&["warm up"]).unwrap();
     let reference = flops::dense_matmul_rate().unwrap();
     println!("threads: {threads}; queries like \"{} 123\"", QUERIES[0]);
-    for batch in [1, 16] {
+    for batch in [1, 4, 16] {
         let (texts, flops) = rate(&encoder, &tokens, batch);
         println!(
             "batch {batch:>2}: {texts:>7.1} texts/s, {:>6.1} GFLOP/s (matmuls), {:>5.1}% of the matmul rate",
