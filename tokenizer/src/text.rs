@@ -82,7 +82,10 @@ impl SentenceEncoder {
             .map_err(|e| TextError::BadFile { file: "model.safetensors", reason: e.to_string() })?;
         let tensors = candle_core::safetensors::load_buffer(&weights, &device)?
             .into_iter()
-            .map(|(name, tensor)| Ok((name.clone(), projection_layout(&name, tensor)?)))
+            .map(|(name, tensor)| {
+                let tensor = projection_layout(&name, tensor)?;
+                Ok((name, tensor))
+            })
             .collect::<Result<HashMap<_, _>, candle_core::Error>>()?;
         let model = BertModel::load(VarBuilder::from_tensors(tensors, DType::F32, &device), &config)?;
         Ok(SentenceEncoder { model, tokenizer, device })
@@ -125,8 +128,9 @@ impl SentenceEncoder {
 /// projections' `[out, in]` matrices stored column-major (the same values and shape). candle's
 /// `Linear` multiplies by the weight's transpose, which for a row-major weight is a strided
 /// operand that gemm reads slowly when a batch holds few tokens, as a search query's does; the
-/// column-major weight makes it contiguous: 3-5x faster products at 6-12 tokens, none slower
-/// at 112 (`cargo bench --workspace --bench sentence_encoder` shows the rate per batch size).
+/// column-major weight makes it contiguous: 3-5x faster products at 6-12 tokens, about the
+/// same at 112 (`cargo bench --workspace --bench sentence_encoder` shows the rate per batch
+/// size).
 /// Embedding tables stay rows, as they are looked up by row.
 fn projection_layout(name: &str, tensor: Tensor) -> Result<Tensor, candle_core::Error> {
     if tensor.rank() == 2 && !name.contains("embeddings.") { tensor.t()?.contiguous()?.t() } else { Ok(tensor) }

@@ -356,9 +356,9 @@ fn shipped_generation_stands_plants_its_feet_and_says_how_good_it_is() {
     }
 }
 
-/// The held-out prompts are judged on the motion generated for the rig, not on that motion
-/// cleaned a second time: cleaning again re-attaches a floating limb by how it moves in the
-/// sample, and refused this sample (the shipped masked generator, seed 137, temperature 1.0, on
+/// The held-out prompts are judged on the motion generated for the rig (the corpus clip as the
+/// models read it, already cleaned), not on that motion cleaned a second time: the second
+/// cleaning refused this sample (the shipped masked generator, seed 137, temperature 1.0, on
 /// the Quaternius rat of 30 joints), which stopped the whole evaluation.
 #[test]
 fn eval_prompts_judges_a_sample_that_a_second_cleaning_refuses() {

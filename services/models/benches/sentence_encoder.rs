@@ -1,9 +1,9 @@
 //! The sentence encoder's rate on short queries, in texts per second, one at a time, in a batch
-//! of 4 (about what a search server gathers under load) and of 16 (when 16 clients ask together), and its achieved
-//! FLOP/s against this machine's dense matmul rate measured in the same run with the same
-//! threads. The FLOPs counted are the encoder's matmuls (projections, feed-forward and
-//! attention, on the batch's padded tokens); element-wise work is not counted, so the figure is
-//! a lower bound on the work done.
+//! of 4 (about what a search server gathers under load) and of 16 (when 16 clients ask
+//! together), and its achieved FLOP/s against this machine's dense matmul rate measured in the
+//! same run with the same threads. The FLOPs counted are the encoder's matmuls (projections,
+//! feed-forward and attention, on the batch's padded tokens); element-wise work is not counted,
+//! so the figure is a lower bound on the work done.
 //!
 //! `cargo bench --workspace --bench sentence_encoder` after `bash tools/setup.sh --models`
 //! (RAYON_NUM_THREADS sets the threads; `anymo serve` runs each model call on one, the other
