@@ -45,13 +45,25 @@ pub enum TextError {
     /// The tensor library failed.
     #[error("running the sentence encoder: {0}")]
     Candle(#[from] candle_core::Error),
+    /// The threads the encoder runs on could not be started.
+    #[error("starting the sentence encoder's threads: {0}")]
+    Threads(#[from] rayon::ThreadPoolBuildError),
 }
 
 /// all-MiniLM-L6-v2, ready to embed sentences on the CPU.
+///
+/// Each encoder runs its forward passes on a thread pool of its own, as many threads as a model
+/// call may use (`RAYON_NUM_THREADS`, else every core). candle-nn's layer norm runs on rayon's
+/// pool: called from a thread outside any pool, each of a pass's 13 layer norms is handed to
+/// rayon's global pool and waited for, which cost one text alone nearly half its time (`cargo
+/// bench --workspace --bench sentence_encoder`), and two encoders side by side waited on the
+/// same global pool. On its own pool a pass is handed over once. Calls to one encoder from
+/// several threads therefore take turns: give each thread its own encoder.
 pub struct SentenceEncoder {
     model: BertModel,
     tokenizer: Tokenizer,
     device: Device,
+    pool: rayon::ThreadPool,
 }
 
 impl SentenceEncoder {
@@ -88,7 +100,8 @@ impl SentenceEncoder {
             })
             .collect::<Result<HashMap<_, _>, candle_core::Error>>()?;
         let model = BertModel::load(VarBuilder::from_tensors(tensors, DType::F32, &device), &config)?;
-        Ok(SentenceEncoder { model, tokenizer, device })
+        let pool = rayon::ThreadPoolBuilder::new().thread_name(|k| format!("anymo-encoder-{k}")).build()?;
+        Ok(SentenceEncoder { model, tokenizer, device, pool })
     }
 
     /// Embeds a batch of texts: one L2-normalised 384-d vector per text.
@@ -110,11 +123,22 @@ impl SentenceEncoder {
             types.extend(e.get_type_ids().iter().map(|&x| x as i64));
         }
         let shape = (texts.len(), len);
+        self.pool.install(|| self.embed(shape, ids, types, mask))
+    }
+
+    /// The forward pass over token ids, type ids and attention mask of `shape` (texts x tokens):
+    /// the mean of the last hidden states over the real tokens, at unit length.
+    fn embed(
+        &self,
+        shape: (usize, usize),
+        ids: Vec<i64>,
+        types: Vec<i64>,
+        mask: Vec<i64>,
+    ) -> Result<Vec<Vec<f32>>, TextError> {
         let ids = Tensor::from_vec(ids, shape, &self.device)?;
         let types = Tensor::from_vec(types, shape, &self.device)?;
         let mask = Tensor::from_vec(mask, shape, &self.device)?;
         let hidden = self.model.forward(&ids, &types, Some(&mask))?;
-        // Mean over real tokens, then unit length.
         let weights = mask.to_dtype(DType::F32)?.unsqueeze(2)?;
         let summed = hidden.broadcast_mul(&weights)?.sum(1)?;
         let counts = weights.sum(1)?.clamp(1e-9, f64::MAX)?;

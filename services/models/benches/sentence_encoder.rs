@@ -72,13 +72,14 @@ fn main() {
             100.0 * flops / reference
         );
     }
-    // One encoder per core, each on its own batches: what a server with a models' thread per
-    // core gets (its matmuls then run on one thread each: RAYON_NUM_THREADS=1). Batches of 8 are
+    // One encoder per core, each on its own thread and batches: what a server with a models'
+    // thread per core gets (its matmuls then run on one thread each: RAYON_NUM_THREADS=1). Batches of 8 are
     // the most that 16 clients, one query each in flight, give each of two threads at once.
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let encoders: Vec<SentenceEncoder> = (0..cores).map(|_| SentenceEncoder::load(&dir).unwrap()).collect();
     for batch in [8, 16] {
         let side_by_side: Vec<(f64, f64)> = std::thread::scope(|s| {
-            let workers: Vec<_> = (0..cores).map(|_| s.spawn(|| rate(&encoder, &tokens, batch))).collect();
+            let workers: Vec<_> = encoders.iter().map(|e| s.spawn(|| rate(e, &tokens, batch))).collect();
             workers.into_iter().map(|w| w.join().unwrap()).collect()
         });
         let (texts, flops) = side_by_side.iter().fold((0.0, 0.0), |(t, f), (a, b)| (t + a, f + b));

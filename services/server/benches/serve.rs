@@ -96,11 +96,14 @@ where
 }
 
 /// The sentence encoder's own rate in texts per second, on batches of `batch` new texts, for
-/// `duration`, from `threads` threads side by side (each with the threads candle gives it).
-fn encoder_rate(encoder: &SentenceEncoder, batch: usize, threads: usize, duration: Duration) -> anyhow::Result<f64> {
+/// `duration`, from `encoders` side by side, each on a thread of its own (and the threads
+/// candle gives it).
+fn encoder_rate(encoders: &[SentenceEncoder], batch: usize, duration: Duration) -> anyhow::Result<f64> {
     std::thread::scope(|s| {
-        let each: Vec<_> = (0..threads)
-            .map(|t| s.spawn(move || one_encoder_rate(encoder, batch, 50_000_000 * (t + 1), duration)))
+        let each: Vec<_> = encoders
+            .iter()
+            .enumerate()
+            .map(|(t, encoder)| s.spawn(move || one_encoder_rate(encoder, batch, 50_000_000 * (t + 1), duration)))
             .collect();
         each.into_iter().map(|e| e.join().expect("an encoder thread panicked")).sum()
     })
@@ -168,10 +171,10 @@ fn main() -> anyhow::Result<()> {
         // side, as the server runs them (on 2 cores, 1.3x one encoder on both cores:
         // `cargo bench --workspace --bench sentence_encoder`).
         let cores = std::thread::available_parallelism()?.get();
-        let encoder = SentenceEncoder::load(&encoder_dir)?;
-        let batched = tokio::task::block_in_place(|| encoder_rate(&encoder, CONNECTIONS, cores, duration))?;
-        let lone = tokio::task::block_in_place(|| encoder_rate(&encoder, 1, 1, duration))?;
-        drop(encoder);
+        let encoders = (0..cores).map(|_| SentenceEncoder::load(&encoder_dir)).collect::<Result<Vec<_>, _>>()?;
+        let batched = tokio::task::block_in_place(|| encoder_rate(&encoders, CONNECTIONS, duration))?;
+        let lone = tokio::task::block_in_place(|| encoder_rate(&encoders[..1], 1, duration))?;
+        drop(encoders);
         println!(
             "{:<34} {batched:>9.1} texts/s in batches of {CONNECTIONS}, one encoder per core; {lone:.1} texts/s one at a time",
             "sentence encoder in-process"
