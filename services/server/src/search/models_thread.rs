@@ -80,8 +80,8 @@ struct Owner {
 }
 
 impl ModelsThread {
-    /// Starts the thread over `library`, fed from `store` (its queries run on `runtime`); up to
-    /// `capacity` jobs wait for it. `batch_texts` observes the texts of every batch.
+    /// Starts a thread for each set of `models` over `library`, fed from `store` (their queries
+    /// run on `runtime`); up to `capacity` jobs wait for them. `batch_texts` observes the texts of every batch.
     pub fn start(
         models: Vec<SearchModels>,
         library: Arc<RwLock<Library>>,
