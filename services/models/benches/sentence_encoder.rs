@@ -73,8 +73,9 @@ fn main() {
         );
     }
     // One encoder per core, each on its own thread and batches: what a server with a models'
-    // thread per core gets (its matmuls then run on one thread each: RAYON_NUM_THREADS=1). Batches of 8 are
-    // the most that 16 clients, one query each in flight, give each of two threads at once.
+    // thread per core gets (its matmuls then run on one thread each: RAYON_NUM_THREADS=1).
+    // Batches of 8 are the most that 16 clients, one query each in flight, give each of two
+    // threads at once.
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
     let encoders: Vec<SentenceEncoder> = (0..cores).map(|_| SentenceEncoder::load(&dir).unwrap()).collect();
     for batch in [8, 16] {

@@ -168,8 +168,8 @@ fn main() -> anyhow::Result<()> {
         anyhow::ensure!(client.get(warm).send().await?.status().is_success(), "the warm-up search failed");
 
         // The reference is the encoder's best batched rate here: one encoder per core side by
-        // side, as the server runs them (on 2 cores, 1.3x one encoder on both cores:
-        // `cargo bench --workspace --bench sentence_encoder`).
+        // side, as the server runs them (`cargo bench --workspace --bench sentence_encoder`
+        // prints it beside one encoder's rate).
         let cores = std::thread::available_parallelism()?.get();
         let encoders = (0..cores).map(|_| SentenceEncoder::load(&encoder_dir)).collect::<Result<Vec<_>, _>>()?;
         let batched = tokio::task::block_in_place(|| encoder_rate(&encoders, CONNECTIONS, duration))?;
