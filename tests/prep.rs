@@ -69,11 +69,31 @@ fn cleaning_restores_exactly_onto_the_original_skeleton() {
 }
 
 #[test]
+fn every_clip_of_a_rig_cleans_to_one_hierarchy() {
+    let Some(files) = corpus_sample(1) else { return };
+    // A rig is a hierarchy as its files write it; its clips must agree on the cleaned one, or
+    // they cannot share a reference pose and one clip's tokens do not read back on another.
+    type Tree = Vec<(Option<usize>, String)>;
+    let tree = |m: &Motion| -> Tree { m.skeleton().joints().iter().map(|j| (j.parent, j.name.clone())).collect() };
+    let mut rigs: BTreeMap<Tree, BTreeMap<Tree, Vec<String>>> = BTreeMap::new();
+    for path in &files {
+        let motion = load(path);
+        let Ok(cleaned) = clean(&motion, &CleanOptions::default()) else { continue };
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        rigs.entry(tree(&motion)).or_default().entry(tree(&cleaned.motion)).or_default().push(name);
+    }
+    let split: Vec<Vec<&Vec<String>>> =
+        rigs.values().filter(|cleaned| cleaned.len() > 1).map(|cleaned| cleaned.values().collect()).collect();
+    assert!(rigs.len() > 30, "the corpus holds many rigs: {}", rigs.len());
+    assert!(split.is_empty(), "rigs whose clips clean to different hierarchies: {split:?}");
+}
+
+#[test]
 fn clean_clips_drop_helpers_and_collapse_dummy_roots() {
     let Some(dir) = data_dir() else { return };
     let bandai = load(&dir.join("bandai/dataset-1/dataset-1_bow_active_001.bvh.gz"));
     let cleaned = clean(&bandai, &CleanOptions::default()).unwrap();
-    // Bandai's static `joint_Root` is folded into `Hips`.
+    // Bandai's `joint_Root`, a helper by its name, is folded into `Hips`.
     assert_eq!(cleaned.motion.skeleton().joint(0).name, "Hips");
     assert_eq!(cleaned.motion.skeleton().len(), bandai.skeleton().len() - 1);
     let horse = load(&dir.join("quaternius/bvh/animals_pack/Horse__Walk.bvh.gz"));
@@ -81,6 +101,27 @@ fn clean_clips_drop_helpers_and_collapse_dummy_roots() {
     let names: Vec<&str> = cleaned.motion.skeleton().joints().iter().map(|j| j.name.as_str()).collect();
     assert!(!names.iter().any(|n| n.contains("PoleTarget") || n.starts_with("IK")), "{names:?}");
     assert_ne!(names[0], "VirtualRoot");
+    // The mech's feet float on its dummy root, animated in position, and go back under the shin
+    // they move with, also when the legs hardly move and the hip holds the foot almost as still.
+    let parent_of = |cleaned: &Motion, name: &str| {
+        let skeleton = cleaned.skeleton();
+        let joint = skeleton.joints().iter().find(|j| j.name == name).expect("the joint is kept");
+        skeleton.joint(joint.parent.expect("not the root")).name.clone()
+    };
+    for clip in ["Dance", "No"] {
+        let path = dir.join(format!("quaternius/bvh/ultimate_space_pack/Mech_FinnTheFrog_transformed__{clip}.bvh.gz"));
+        let cleaned = clean(&load(&path), &CleanOptions::default()).unwrap().motion;
+        assert_eq!(cleaned.skeleton().joint(0).name, "Body", "{clip}");
+        assert_eq!(parent_of(&cleaned, "Foot.L"), "LowerLeg.L", "{clip}");
+        assert_eq!(parent_of(&cleaned, "Foot.R"), "LowerLeg.R", "{clip}");
+    }
+    // The spider's foot targets are only rotated by the file: fixed in its root's frame, they
+    // stay there, in the idle as in the walk.
+    for clip in ["Idle", "Walk"] {
+        let path = dir.join(format!("quaternius/bvh/easy_enemies_pack/Spider__Spider_{clip}.bvh.gz"));
+        let cleaned = clean(&load(&path), &CleanOptions::default()).unwrap().motion;
+        assert_eq!(parent_of(&cleaned, "FrontFoot.L"), "Root", "{clip}");
+    }
 }
 
 #[test]

@@ -3,6 +3,13 @@
 //! translation kept on the root only, clips with abnormal bones rejected with a reason, and
 //! everything scaled so the skeleton's diameter is 1.
 //!
+//! The cleaned hierarchy is decided by the rig, not by one clip's motion: which joints are
+//! dummies and which limbs float follow from names and the file's channels, and a floating limb
+//! goes to the body joint it moves with (the nearest of those that hold it equally still, so a
+//! clip in which nothing moves chooses as a moving one does). Every clip of a rig therefore
+//! cleans to the same tree, so its clips share one reference pose, and tokens taken on one clip
+//! read back on another.
+//!
 //! Cleaning never changes what a user gets back: [`CleanClip::restore`] writes a cleaned motion
 //! onto the original skeleton, reproducing every kept joint's global position.
 
@@ -20,22 +27,15 @@ pub struct CleanOptions {
     /// Reject a clip when a non-root joint's translation drifts from its mean by more than this
     /// fraction of the diameter (frame-dependent bone lengths: tracking or export errors).
     pub max_translation_drift: f32,
-    /// Motion this close to constant (diameter units, or radians) counts as static.
-    pub static_tolerance: f32,
     /// A child branch of a dummy root with at most this fraction of the joints of the largest
-    /// branch is a floating limb (an IK-driven foot), re-attached to the joint of the largest
-    /// branch it moves most rigidly with.
+    /// branch, whose top joint the file animates in position, is a floating limb (an IK-driven
+    /// foot), re-attached to the joint of the largest branch it moves most rigidly with.
     pub floating_limb_fraction: f32,
 }
 
 impl Default for CleanOptions {
     fn default() -> Self {
-        CleanOptions {
-            max_bone_fraction: 0.75,
-            max_translation_drift: 0.05,
-            static_tolerance: 1e-4,
-            floating_limb_fraction: 0.25,
-        }
+        CleanOptions { max_bone_fraction: 0.75, max_translation_drift: 0.05, floating_limb_fraction: 0.25 }
     }
 }
 
@@ -103,15 +103,17 @@ pub fn clean(motion: &Motion, options: &CleanOptions) -> Result<CleanClip, Rejec
     let mut parent: Vec<Option<usize>> = joints.iter().map(|j| j.parent).collect();
 
     // 2. Walk down dummy roots: re-attach floating limbs, then collapse while one child remains.
+    // A dummy is a helper by name, or a carrier frame: a root whose one child the file moves in
+    // position. Neither depends on the clip's motion, so all clips of a rig agree.
     let mut root = 0;
     loop {
-        let dummy = label_name(&joints[root].name).helper || is_static(motion, root, options.static_tolerance);
-        if !dummy {
+        let kids: Vec<usize> = (0..n).filter(|&c| keep[c] && parent[c] == Some(root)).collect();
+        let carrier = kids.len() == 1 && joints[kids[0]].channels.has_position();
+        if !label_name(&joints[root].name).helper && !carrier {
             break;
         }
-        let kids: Vec<usize> = (0..n).filter(|&c| keep[c] && parent[c] == Some(root)).collect();
         if kids.len() > 1 {
-            reattach_floating_limbs(root, &kids, &mut parent, &keep, &globals, options.floating_limb_fraction);
+            reattach_floating_limbs(original, &kids, &mut parent, &keep, &globals, options.floating_limb_fraction);
         }
         let kids: Vec<usize> = (0..n).filter(|&c| keep[c] && parent[c] == Some(root)).collect();
         if kids.len() != 1 || !(0..n).any(|d| keep[d] && parent[d] == Some(kids[0])) {
@@ -247,18 +249,23 @@ impl CleanClip {
     }
 }
 
-/// Re-parents the small branches among `kids` (children of the dummy root `root`) to the joint
-/// of the largest branch they move most rigidly with, when that is more rigid than the root.
+/// Re-parents the small branches among `kids` (children of a dummy root) whose top joint the
+/// file animates in position to the joint of the largest branch they move most rigidly with,
+/// the nearest of those when several hold it equally still (a leg held still in an idle holds
+/// its foot as rigidly as its hip does). A branch the file only rotates is fixed in the root's
+/// frame and stays where it is; whether a branch floats never depends on how much it moves in
+/// one clip, so every clip of a rig makes the same choice.
 fn reattach_floating_limbs(
-    root: usize,
+    skeleton: &Skeleton,
     kids: &[usize],
     parent: &mut [Option<usize>],
     keep: &[bool],
     globals: &[Transform],
     fraction: f32,
 ) {
-    let n = parent.len();
+    let (joints, n) = (skeleton.joints(), parent.len());
     let frames = globals.len() / n;
+    let tie = RIGID_TIE * skeleton.diameter();
     let in_branch = |parent: &[Option<usize>], top: usize| -> Vec<usize> {
         let mut members = vec![top];
         let mut i = 0;
@@ -275,41 +282,44 @@ fn reattach_floating_limbs(
         let mean = (0..frames).map(local).sum::<Vec3>() / frames as f32;
         (0..frames).map(|f| local(f).distance(mean)).fold(0.0f32, f32::max)
     };
+    // How far `limb` sits from `candidate`'s origin, or its end site, on average.
+    let distance = |limb: usize, candidate: usize| {
+        let at = |f: usize| {
+            let (g, p) = (globals[f * n + candidate], globals[f * n + limb].translation);
+            let tip = joints[candidate].end_site.map_or(f32::INFINITY, |e| g.apply(e).distance(p));
+            g.translation.distance(p).min(tip)
+        };
+        (0..frames).map(at).sum::<f32>() / frames as f32
+    };
     let branches: Vec<Vec<usize>> = kids.iter().map(|&k| in_branch(parent, k)).collect();
     let body = (0..kids.len()).max_by_key(|&b| branches[b].len()).expect("at least two children");
     let limit = (branches[body].len() as f32 * fraction).max(1.0);
     for (b, branch) in branches.iter().enumerate() {
-        if b == body || branch.len() as f32 > limit {
+        let limb = kids[b];
+        if b == body || branch.len() as f32 > limit || !joints[limb].channels.has_position() {
             continue;
         }
-        let limb = kids[b];
-        let (best, best_drift) = branches[body]
+        let drifts: Vec<f32> = branches[body].iter().map(|&c| drift(limb, c)).collect();
+        let least = drifts.iter().copied().fold(f32::INFINITY, f32::min);
+        let chosen = branches[body]
             .iter()
-            .map(|&c| (c, drift(limb, c)))
+            .zip(&drifts)
+            .filter(|(_, d)| **d <= least + tie)
+            .map(|(&c, _)| (c, distance(limb, c)))
             .min_by(|x, y| x.1.total_cmp(&y.1))
             .expect("the body branch has its top joint");
-        if best_drift < drift(limb, root) {
-            parent[limb] = Some(best);
-        }
+        parent[limb] = Some(chosen.0);
     }
 }
+
+/// Drifts within this fraction of the skeleton's diameter count as equally rigid when a
+/// floating limb picks the joint it moves with.
+const RIGID_TIE: f32 = 1e-3;
 
 /// True for joints that start a rig-helper branch (IK and pole targets, props).
 fn is_helper_branch(name: &str) -> bool {
     let label = label_name(name);
     label.helper && label.part != "root"
-}
-
-/// True when a joint's local transform is the same in every frame.
-fn is_static(motion: &Motion, joint: usize, tolerance: f32) -> bool {
-    let r0 = motion.rotations(0)[joint];
-    let t0 = motion.translations(0)[joint];
-    let size = motion.skeleton().diameter().max(f32::MIN_POSITIVE);
-    (1..motion.frames()).all(|f| {
-        let r = motion.rotations(f)[joint];
-        let t = motion.translations(f)[joint];
-        crate::rotation::geodesic_angle(r0, r) <= tolerance && (t - t0).length() / size <= tolerance
-    })
 }
 
 fn compose(a: Transform, b: Transform) -> Transform {
@@ -320,4 +330,106 @@ fn compose(a: Transform, b: Transform) -> Transform {
 fn relative(a: Transform, b: Transform) -> Transform {
     let inverse = a.rotation.inverse();
     Transform { rotation: (inverse * b.rotation).normalize(), translation: inverse * (b.translation - a.translation) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::skeleton::{Channels, EulerOrder, rotating_joint};
+    use glam::Quat;
+
+    /// A joint the file moves in position as well as rotating.
+    fn positioned(name: &str, parent: Option<usize>, offset: Vec3) -> Joint {
+        Joint { channels: Channels::position_rotation(EulerOrder::Zyx), ..rotating_joint(name, parent, offset) }
+    }
+
+    /// A body under `root`: hips (moved in position), spine and head, two legs of thigh and
+    /// shin, the shins ending 0.4 below their knee.
+    fn body(root: Joint) -> Vec<Joint> {
+        let mut joints = vec![root, positioned("Hips", Some(0), Vec3::Y)];
+        joints.push(rotating_joint("Spine", Some(1), Vec3::Y * 0.5));
+        joints.push(rotating_joint("Head", Some(2), Vec3::Y * 0.5));
+        for (side, x) in [("L", 0.2), ("R", -0.2)] {
+            let thigh = joints.len();
+            joints.push(rotating_joint(&format!("Thigh.{side}"), Some(1), Vec3::X * x));
+            let shin = Joint {
+                end_site: Some(Vec3::Y * -0.4),
+                ..rotating_joint(&format!("Shin.{side}"), Some(thigh), Vec3::Y * -0.5)
+            };
+            joints.push(shin);
+        }
+        joints
+    }
+
+    /// 20 frames: the hips travel `speed` per frame along +Z, the left knee bends by up to
+    /// `swing` radians, and the joint named `Foot`, when the file moves it in position, sits at
+    /// the left shin's tip (an IK target; the root stays at the origin, so its translation is
+    /// that position).
+    fn clip(skeleton: &Skeleton, speed: f32, swing: f32) -> Motion {
+        let (n, frames) = (skeleton.len(), 20);
+        let index = |name: &str| skeleton.joints().iter().position(|j| j.name == name);
+        let (hips, shin) = (index("Hips").unwrap(), index("Shin.L").unwrap());
+        let mut rotations = Vec::new();
+        let mut translations = Vec::new();
+        for f in 0..frames {
+            let mut r = vec![Quat::IDENTITY; n];
+            r[shin] = Quat::from_rotation_x(swing * (f as f32 * 0.7).sin());
+            let mut t: Vec<Vec3> = skeleton.joints().iter().map(|j| j.offset).collect();
+            t[hips] += Vec3::Z * speed * f as f32;
+            rotations.extend(r);
+            translations.extend(t);
+        }
+        let motion = Motion::new(skeleton.clone(), 1.0 / 30.0, rotations.clone(), translations.clone()).unwrap();
+        if let Some(foot) = index("Foot").filter(|&f| skeleton.joint(f).channels.has_position()) {
+            let globals = all_global_transforms(&motion);
+            let tip = skeleton.joint(shin).end_site.unwrap();
+            for f in 0..frames {
+                translations[f * n + foot] = globals[f * n + shin].apply(tip);
+            }
+        }
+        Motion::new(skeleton.clone(), 1.0 / 30.0, rotations, translations).unwrap()
+    }
+
+    fn parent_name(motion: &Motion, name: &str) -> Option<String> {
+        let skeleton = motion.skeleton();
+        let joint = skeleton.joints().iter().find(|j| j.name == name).expect("the joint is kept");
+        joint.parent.map(|p| skeleton.joint(p).name.clone())
+    }
+
+    #[test]
+    fn a_root_that_carries_its_child_in_position_collapses_whatever_its_name() {
+        // "Reference" is no helper by name; it is a dummy because the file moves the hips on it.
+        let skeleton = Skeleton::new(body(rotating_joint("Reference", None, Vec3::ZERO))).unwrap();
+        for speed in [0.0, 0.1] {
+            let cleaned = clean(&clip(&skeleton, speed, 0.5), &CleanOptions::default()).unwrap().motion;
+            assert_eq!(cleaned.skeleton().joint(0).name, "Hips", "speed {speed}");
+            assert_eq!(cleaned.skeleton().len(), skeleton.len() - 1);
+        }
+        // A root whose one child only rotates is part of the body, moving or not.
+        let mut joints = body(rotating_joint("Pelvis", None, Vec3::ZERO));
+        joints[1] = rotating_joint("Hips", Some(0), Vec3::Y);
+        let skeleton = Skeleton::new(joints).unwrap();
+        let cleaned = clean(&clip(&skeleton, 0.0, 0.5), &CleanOptions::default()).unwrap().motion;
+        assert_eq!(cleaned.skeleton().joint(0).name, "Pelvis");
+    }
+
+    #[test]
+    fn a_floating_foot_goes_to_its_shin_in_every_clip() {
+        let mut joints = body(rotating_joint("Root", None, Vec3::ZERO));
+        joints.push(positioned("Foot", Some(0), Vec3::new(0.2, 0.1, 0.0)));
+        let skeleton = Skeleton::new(joints).unwrap();
+        // Walking with a bending knee only the shin holds the foot still; standing stock-still
+        // every joint does, and the shin's tip is where the foot is.
+        for (speed, swing) in [(0.1, 0.6), (0.0, 0.0)] {
+            let cleaned = clean(&clip(&skeleton, speed, swing), &CleanOptions::default()).unwrap().motion;
+            assert_eq!(cleaned.skeleton().joint(0).name, "Hips", "speed {speed}");
+            assert_eq!(parent_name(&cleaned, "Foot").as_deref(), Some("Shin.L"), "speed {speed}, swing {swing}");
+        }
+        // A foot the file only rotates is fixed in the root's frame and stays on it.
+        let mut joints = body(rotating_joint("Root", None, Vec3::ZERO));
+        joints.push(rotating_joint("Foot", Some(0), Vec3::new(0.2, 0.1, 0.0)));
+        let skeleton = Skeleton::new(joints).unwrap();
+        let cleaned = clean(&clip(&skeleton, 0.0, 0.6), &CleanOptions::default()).unwrap().motion;
+        assert_eq!(parent_name(&cleaned, "Foot").as_deref(), Some("Root"));
+    }
 }
