@@ -28,9 +28,12 @@ pub struct Cleanup {
     pub floor: f32,
     /// Whether the root keeps its path and height, and planted feet are held where they stand
     /// rather than on the floor: for motion whose root is known (a real clip's tokens carry it),
-    /// where turning every slide back would add up to a path that leaves the clip's. Otherwise
-    /// the root travels so that feet planted together stop sliding, and rises or sinks so that
-    /// they stand on the floor.
+    /// where turning every slide back would add up to a path that leaves the clip's. Contacts
+    /// are then read against the floor, or the clip's own ground where that lies above it (a
+    /// foot that sinks below the floor in a few frames does not make the others too high to
+    /// plant). Otherwise the root travels so that feet planted together stop sliding, and rises
+    /// or sinks so that they stand on the floor, and contacts are read against the clip's own
+    /// ground, wherever it lies.
     pub keep_root: bool,
 }
 
@@ -64,7 +67,11 @@ impl Cleanup {
         let globals = all_global_transforms(&smoothed);
         let points = foot_points(&smoothed, &feet, &globals);
         let scale = skeleton.diameter();
+        // Where the root keeps its height (decoded from a real clip's tokens, in the frame the
+        // tokenizer reads clips in, whose floor is y = 0), feet that sink below the floor in
+        // some frames do not lower the ground the others are read against.
         let ground = ground_height(&points, feet.len()) / scale;
+        let ground = if self.keep_root { ground.max(0.0) } else { ground };
         let unit_points: Vec<Vec3> = points.iter().map(|p| *p / scale).collect();
         let planted = contacts(&unit_points, feet.len(), smoothed.fps() as f32, ground, &self.rule);
         let floor = self.floor * scale;
@@ -280,6 +287,11 @@ mod tests {
     /// The biped walking in place badly: floating 0.08 above the floor, its left foot sliding
     /// forward 0.02 per frame while low, its knees bending and straightening, for 30 frames.
     fn floating_slide() -> Motion {
+        sliding_walk(|_| 0.08)
+    }
+
+    /// [`floating_slide`] with the root `lift(f)` above standing height in frame `f`.
+    fn sliding_walk(lift: impl Fn(usize) -> f32) -> Motion {
         let stand = biped("Leg", "Foot");
         let (skeleton, _, _, _) = stand.clone().into_parts();
         let n = skeleton.len();
@@ -295,10 +307,28 @@ mod tests {
                     _ => Quat::IDENTITY,
                 };
                 rotations.push(r);
-                translations.push(if j == 0 { Vec3::new(0.0, 0.95 + 0.08, 0.0) } else { skeleton.joint(j).offset });
+                translations.push(if j == 0 { Vec3::new(0.0, 0.95 + lift(f), 0.0) } else { skeleton.joint(j).offset });
             }
         }
         Motion::new(skeleton, 1.0 / 30.0, rotations, translations).unwrap()
+    }
+
+    #[test]
+    fn a_kept_root_plants_feet_near_the_floor_though_two_frames_sink_below_it() {
+        // Decoded with its root kept, the walk stands 0.02 diameters above the floor, and its
+        // first two frames sink 0.1 below it: the clip's own ground (its 5th percentile) lies
+        // 0.1 down, and read against it no foot of the other frames is low enough to plant.
+        let diameter = sliding_walk(|_| 0.0).skeleton().diameter();
+        let motion = sliding_walk(|f| if f < 2 { -0.1 * diameter } else { 0.02 * diameter });
+        let kept = Cleanup { smoothing: 0.0, keep_root: true, ..Cleanup::default() };
+        let (held, report) = kept.apply(&motion);
+        assert!(report.planted > 0.6, "{report:?}");
+        for f in 0..30 {
+            assert_eq!(held.translations(f)[0], motion.translations(f)[0], "frame {f}: the root is kept");
+        }
+        // With the root free to rise and sink, the clip's own ground is what its feet stand on.
+        let (_, free) = Cleanup { keep_root: false, ..kept }.apply(&motion);
+        assert!(free.planted < 0.2, "{free:?}");
     }
 
     #[test]
